@@ -1,0 +1,26 @@
+"""Errors that reach the user as one line: the file (or parameter) and what is wrong with it."""
+
+from __future__ import annotations
+
+from pathlib import Path
+
+
+class RoutefuseError(Exception):
+    """Base class: an error the CLI prints as one line and exits 2 on, and the UI notifies."""
+
+    def __init__(self, source: str | Path | None, problem: str) -> None:
+        self.source = None if source is None else str(source)
+        self.problem = problem
+        super().__init__(f"{self.source}: {problem}" if self.source else problem)
+
+
+class LogError(RoutefuseError):
+    """A log file that cannot be read, or lacks what the estimator needs."""
+
+
+class RouteError(RoutefuseError):
+    """A route file that cannot be parsed or is unusable (too short, far away, ...)."""
+
+
+class ConfigError(RoutefuseError):
+    """A parameter file or a parameter value that is invalid."""

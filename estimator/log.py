@@ -1,0 +1,97 @@
+"""The in-memory log: every sensor stream as numpy arrays, times in seconds (float64, the bag's
+clock), IMU already rotated into the body frame (forward-left-up)."""
+
+from __future__ import annotations
+
+from dataclasses import dataclass, field
+
+import numpy as np
+from numpy.typing import NDArray
+
+F64 = NDArray[np.float64]
+
+GNSS_NO_FIX = -1
+
+
+@dataclass(frozen=True)
+class ImuData:
+    t: F64
+    """(N,) s"""
+    gyro: F64
+    """(N, 3) body angular rate, rad/s, FLU"""
+    accel: F64
+    """(N, 3) specific force, m/s^2, FLU (+g on z when level and still)"""
+
+
+@dataclass(frozen=True)
+class WheelData:
+    t: F64
+    speed: F64
+    """(N,) forward speed, m/s"""
+
+
+@dataclass(frozen=True)
+class GnssData:
+    t: F64
+    lat: F64
+    lon: F64
+    alt: F64
+    """ellipsoidal height, m"""
+    status: NDArray[np.int8]
+    """NavSatStatus: -1 no fix, 0 fix, 1 SBAS, 2 GBAS"""
+    cov_enu: F64
+    """(N, 3) variances E, N, U in m^2 (NaN when the message has none)"""
+
+    @property
+    def valid(self) -> NDArray[np.bool_]:
+        """Fixes that carry a position: NO_FIX or NaN both mean 'no GNSS'."""
+        return (
+            (self.status >= 0)
+            & np.isfinite(self.lat)
+            & np.isfinite(self.lon)
+            & np.isfinite(self.alt)
+        )
+
+
+@dataclass(frozen=True)
+class TruthData:
+    t: F64
+    lat: F64
+    lon: F64
+    alt: F64
+    heading: F64
+    """(N,) ENU yaw of the body x axis, rad, counter-clockwise from East; NaN if unknown"""
+
+
+@dataclass(frozen=True)
+class TopicInfo:
+    topic: str
+    msgtype: str
+    count: int
+    role: str
+    """'imu', 'gnss', 'wheel', 'truth', 'truth_pose', 'tf_static' or '' (unused)"""
+
+
+@dataclass(frozen=True)
+class Log:
+    """One decoded log. Immutable; the estimator never changes it."""
+
+    path: str
+    imu: ImuData
+    gnss: GnssData
+    wheel: WheelData | None = None
+    truth: TruthData | None = None
+    topics: tuple[TopicInfo, ...] = ()
+    warnings: tuple[str, ...] = field(default=())
+
+    @property
+    def t_start(self) -> float:
+        return float(self.imu.t[0])
+
+    @property
+    def t_end(self) -> float:
+        return float(self.imu.t[-1])
+
+    @property
+    def duration_s(self) -> float:
+        return self.t_end - self.t_start

@@ -1,0 +1,370 @@
+"""Every estimator parameter, declared once.
+
+One frozen dataclass tree drives the CLI (``--set group.name=value``), TOML config files
+(``[group] name = value``) and the inspector's parameter panel. A parameter is declared with
+:func:`param`, whose metadata (doc, unit, bounds, step) is what the CLI help, the TOML comments
+and the GUI sliders show. Angles are degrees here (the edge) and radians inside the estimator.
+"""
+
+from __future__ import annotations
+
+import dataclasses
+import tomllib
+from collections.abc import Iterator
+from dataclasses import dataclass, field, fields, is_dataclass, replace
+from pathlib import Path
+from typing import Any, Literal, get_args, get_type_hints
+
+import tomli_w
+
+from .errors import ConfigError
+
+Method = Literal["baseline", "proposed", "paper"]
+"""``baseline``: GNSS/INS/ODO, plain DR in outages. ``proposed``: routefuse (the paper's method
+plus every extension switched on in :class:`ExtensionParams`). ``paper``: the published method
+only, every extension off."""
+
+
+def param(
+    default: Any,
+    doc: str,
+    *,
+    unit: str = "",
+    lo: float | None = None,
+    hi: float | None = None,
+    step: float | None = None,
+    choices: tuple[str, ...] | None = None,
+) -> Any:
+    """A dataclass field carrying what the CLI, TOML and GUI need to present it."""
+    meta = {"doc": doc, "unit": unit, "lo": lo, "hi": hi, "step": step, "choices": choices}
+    if isinstance(default, tuple):
+        return field(default_factory=lambda: default, metadata=meta)
+    return field(default=default, metadata=meta)
+
+
+@dataclass(frozen=True)
+class TriggerParams:
+    """When a route match is attempted (the paper's trigger control)."""
+
+    min_outage_s: float = param(
+        4.0, "GNSS must be absent this long before the first match", unit="s", lo=0, hi=120,
+        step=0.5)
+    min_outage_distance_m: float = param(
+        40.0, "DR distance driven inside the outage before the first match", unit="m", lo=0,
+        hi=1000, step=5)
+    interval_s: float = param(
+        1.0, "time between two match attempts (low-rate updates)", unit="s", lo=0.1, hi=30,
+        step=0.1)
+
+
+@dataclass(frozen=True)
+class WindowParams:
+    """The DR window and the local route segment it is matched to."""
+
+    length_m: float = param(
+        250.0, "arc length of the DR window matched to the route", unit="m", lo=20, hi=3000,
+        step=10)
+    spacing_m: float = param(
+        5.0, "spatial resampling interval of window and route segment", unit="m", lo=0.5, hi=50,
+        step=0.5)
+    route_search_m: float = param(
+        60.0, "arc-length search radius around the previous route projection", unit="m", lo=5,
+        hi=2000, step=5)
+
+
+@dataclass(frozen=True)
+class GateParams:
+    """Quality gates: a failed gate skips the pseudo-position update."""
+
+    min_pairs: int = param(20, "minimum number of valid point pairs", lo=3, hi=500, step=1)
+    max_heading_diff_deg: float = param(
+        10.0, "terminal heading gate: angle between DR and route end directions (signed cos)",
+        unit="deg", lo=0.5, hi=90, step=0.5)
+    max_residual_m: float = param(
+        3.0, "RMS registration residual after the rigid fit", unit="m", lo=0.1, hi=50, step=0.1)
+    max_correction_m: float = param(
+        30.0, "cap on a single correction |z - p_dr|", unit="m", lo=0.5, hi=500, step=0.5)
+    max_rotation_deg: float = param(
+        15.0, "largest fitted rotation accepted", unit="deg", lo=0.5, hi=180, step=0.5)
+
+
+@dataclass(frozen=True)
+class PseudoObsParams:
+    """The E/N pseudo-position observation."""
+
+    sigma_m: float = param(
+        2.0, "1-sigma of the pseudo-position (the paper's conservative, isotropic R)", unit="m",
+        lo=0.05, hi=100, step=0.05)
+
+
+@dataclass(frozen=True)
+class OffsetParams:
+    """Route offset compensation: keep the lane offset the vehicle had under good GNSS."""
+
+    enabled: bool = param(True, "add the learned lateral lane offset to the pseudo-position")
+    time_constant_s: float = param(
+        20.0, "averaging time constant of the learned offset", unit="s", lo=0.5, hi=600, step=0.5)
+    max_offset_m: float = param(
+        8.0, "offsets larger than this are not learned (off-route)", unit="m", lo=0, hi=50,
+        step=0.5)
+
+
+@dataclass(frozen=True)
+class ExtensionParams:
+    """routefuse's additions beyond the paper; each can be switched off (``--method paper``)."""
+
+    geometry_covariance: bool = param(
+        True, "observation covariance follows route geometry (along-track weak on straights)")
+    candidate_validation: bool = param(
+        True, "reject candidates that fit worse than shifted/reversed alternatives, or whose "
+        "innovation is improbable (Mahalanobis)")
+    along_track_search: bool = param(
+        True, "search the route arc-length offset that minimises the residual")
+    heading_observation: bool = param(False, "feed the fitted rotation as a heading observation")
+    robust_gnss: bool = param(
+        True, "test fixes against dead-reckoned motion; drop disagreeing fixes before outages")
+    wheel_scale_state: bool = param(True, "estimate the wheel-speed scale factor as a state")
+
+
+@dataclass(frozen=True)
+class NoiseParams:
+    """Sensor noise and filter tuning (SI units except where the unit says otherwise)."""
+
+    gyro_arw_deg_sqrt_h: float = param(
+        0.3, "gyro angle random walk", unit="deg/sqrt(h)", lo=0.001, hi=10, step=0.01)
+    accel_vrw_m_s_sqrt_h: float = param(
+        0.2, "accelerometer velocity random walk", unit="m/s/sqrt(h)", lo=0.001, hi=10,
+        step=0.01)
+    gyro_bias_sigma_deg_h: float = param(
+        10.0, "gyro bias instability (Gauss-Markov sigma)", unit="deg/h", lo=0.01, hi=1000,
+        step=0.5)
+    gyro_bias_tau_s: float = param(
+        3600.0, "gyro bias correlation time", unit="s", lo=1, hi=100000, step=10)
+    accel_bias_sigma_mg: float = param(
+        2.0, "accelerometer bias instability (Gauss-Markov sigma)", unit="mg", lo=0.001, hi=100,
+        step=0.1)
+    accel_bias_tau_s: float = param(
+        3600.0, "accelerometer bias correlation time", unit="s", lo=1, hi=100000, step=10)
+    wheel_speed_sigma_m_s: float = param(
+        0.1, "wheel speed observation 1-sigma", unit="m/s", lo=0.001, hi=5, step=0.01)
+    nhc_sigma_m_s: float = param(
+        0.1, "non-holonomic constraint 1-sigma (lateral and vertical body velocity)",
+        unit="m/s", lo=0.001, hi=5, step=0.01)
+    gnss_sigma_floor_m: float = param(
+        0.5, "smallest GNSS horizontal 1-sigma trusted, whatever the message claims", unit="m",
+        lo=0.01, hi=50, step=0.05)
+    gnss_chi2_gate: float = param(
+        16.0, "chi-square gate on the GNSS innovation (3 dof)", lo=1, hi=1000, step=0.5)
+    wheel_scale_sigma: float = param(
+        0.01, "initial 1-sigma of the wheel-speed scale factor error", lo=0, hi=0.2,
+        step=0.001)
+
+
+@dataclass(frozen=True)
+class SensorParams:
+    """Mounting and timing: what a real log needs to be configured with."""
+
+    imu_roll_deg: float = param(0.0, "IMU-to-body rotation: roll", unit="deg", lo=-180, hi=180,
+                                step=0.1)
+    imu_pitch_deg: float = param(0.0, "IMU-to-body rotation: pitch", unit="deg", lo=-90, hi=90,
+                                 step=0.1)
+    imu_yaw_deg: float = param(0.0, "IMU-to-body rotation: yaw", unit="deg", lo=-180, hi=180,
+                               step=0.1)
+    gnss_lever_arm_m: tuple[float, float, float] = param(
+        (0.0, 0.0, 0.0), "GNSS antenna position in the body frame (forward, left, up)", unit="m")
+    gnss_time_offset_s: float = param(
+        0.0, "added to GNSS stamps to put them on the IMU clock", unit="s", lo=-2, hi=2,
+        step=0.01)
+    wheel_time_offset_s: float = param(
+        0.0, "added to wheel-speed stamps to put them on the IMU clock", unit="s", lo=-2, hi=2,
+        step=0.01)
+    initial_heading_deg: float | None = param(
+        None, "initial heading (ENU yaw, counter-clockwise from East); None = from GNSS motion",
+        unit="deg")
+
+
+@dataclass(frozen=True)
+class Params:
+    """The whole estimator configuration."""
+
+    trigger: TriggerParams = field(default_factory=TriggerParams)
+    window: WindowParams = field(default_factory=WindowParams)
+    gates: GateParams = field(default_factory=GateParams)
+    pseudo: PseudoObsParams = field(default_factory=PseudoObsParams)
+    offset: OffsetParams = field(default_factory=OffsetParams)
+    extensions: ExtensionParams = field(default_factory=ExtensionParams)
+    noise: NoiseParams = field(default_factory=NoiseParams)
+    sensors: SensorParams = field(default_factory=SensorParams)
+    output_rate_hz: float = param(
+        20.0, "rate of the per-epoch results kept for inspection", unit="Hz", lo=1, hi=200,
+        step=1)
+
+
+@dataclass(frozen=True)
+class ParamSpec:
+    """One leaf parameter: its dotted name, type, default and presentation metadata."""
+
+    name: str
+    group: str
+    type: Any
+    default: Any
+    doc: str
+    unit: str
+    lo: float | None
+    hi: float | None
+    step: float | None
+    choices: tuple[str, ...] | None
+
+
+def param_specs(cls: type = Params, prefix: str = "") -> Iterator[ParamSpec]:
+    """Every leaf parameter of the tree, in declaration order."""
+    hints = get_type_hints(cls)
+    for f in fields(cls):
+        tp = hints[f.name]
+        if is_dataclass(tp):
+            yield from param_specs(tp, f"{prefix}{f.name}.")
+            continue
+        default = f.default if f.default is not dataclasses.MISSING else f.default_factory()  # type: ignore[misc]
+        m = f.metadata
+        yield ParamSpec(
+            name=f"{prefix}{f.name}", group=prefix.rstrip(".") or "general", type=tp,
+            default=default, doc=m.get("doc", ""), unit=m.get("unit", ""), lo=m.get("lo"),
+            hi=m.get("hi"), step=m.get("step"), choices=m.get("choices") or _literal(tp))
+
+
+def _literal(tp: Any) -> tuple[str, ...] | None:
+    args = get_args(tp)
+    return tuple(args) if args and all(isinstance(a, str) for a in args) else None
+
+
+def get_param(params: Params, name: str) -> Any:
+    obj: Any = params
+    for part in name.split("."):
+        obj = getattr(obj, part)
+    return obj
+
+
+def _spec(name: str) -> ParamSpec:
+    for s in param_specs():
+        if s.name == name:
+            return s
+    known = ", ".join(s.name for s in param_specs())
+    raise ConfigError(None, f"unknown parameter {name!r} (known: {known})")
+
+
+def coerce_value(spec: ParamSpec, value: Any, source: str | None = None) -> Any:
+    """Convert and check one value (from TOML, a CLI string or a GUI widget)."""
+    where = source or spec.name
+    tp = spec.type
+    try:
+        if tp is bool:
+            if isinstance(value, str):
+                if value.lower() not in ("true", "false", "1", "0", "yes", "no", "on", "off"):
+                    raise ValueError(value)
+                value = value.lower() in ("true", "1", "yes", "on")
+            return bool(value)
+        if tp is int:
+            out: Any = int(value)
+        elif tp is float or tp == (float | None):
+            if value is None or (isinstance(value, str) and value.lower() in ("none", "")):
+                if tp is float:
+                    raise ValueError("a number is required")
+                return None
+            out = float(value)
+        elif str(tp).startswith("tuple"):
+            items = value.split(",") if isinstance(value, str) else list(value)
+            out = tuple(float(v) for v in items)
+            if len(out) != len(spec.default):
+                raise ValueError(f"expected {len(spec.default)} numbers")
+            return out
+        else:
+            out = str(value)
+    except (TypeError, ValueError) as exc:
+        raise ConfigError(where, f"{spec.name}: invalid value {value!r} ({exc})") from None
+    if isinstance(out, float) and out != out:
+        raise ConfigError(where, f"{spec.name}: NaN is not a valid value")
+    if spec.choices and out not in spec.choices:
+        raise ConfigError(where, f"{spec.name}: {out!r} is not one of {spec.choices}")
+    if isinstance(out, int | float) and not isinstance(out, bool):
+        if spec.lo is not None and out < spec.lo or spec.hi is not None and out > spec.hi:
+            raise ConfigError(where, f"{spec.name}={out} is outside [{spec.lo}, {spec.hi}]")
+    return out
+
+
+def with_values(params: Params, values: dict[str, Any], source: str | None = None) -> Params:
+    """A copy of ``params`` with dotted-name values replaced (checked and converted)."""
+    for name, raw in values.items():
+        spec = _spec(name)
+        params = _replace_path(params, name.split("."), coerce_value(spec, raw, source))
+    return params
+
+
+def _replace_path(obj: Any, path: list[str], value: Any) -> Any:
+    if len(path) == 1:
+        return replace(obj, **{path[0]: value})
+    return replace(obj, **{path[0]: _replace_path(getattr(obj, path[0]), path[1:], value)})
+
+
+def parse_assignments(items: list[str]) -> dict[str, str]:
+    """``["gates.max_residual_m=2.5", ...]`` from ``--set`` into a dict."""
+    out: dict[str, str] = {}
+    for item in items:
+        name, sep, value = item.partition("=")
+        if not sep:
+            raise ConfigError(None, f"--set expects NAME=VALUE, got {item!r}")
+        out[name.strip()] = value.strip()
+    return out
+
+
+def load_params(path: str | Path, base: Params | None = None) -> Params:
+    """Parameters from a TOML file (tables named like the groups; unknown keys are errors)."""
+    path = Path(path)
+    try:
+        data = tomllib.loads(path.read_text(encoding="utf-8"))
+    except OSError as exc:
+        raise ConfigError(path, f"cannot read config: {exc.strerror or exc}") from None
+    except (tomllib.TOMLDecodeError, UnicodeDecodeError) as exc:
+        raise ConfigError(path, f"not valid TOML: {exc}") from None
+    flat: dict[str, Any] = {}
+
+    def walk(d: dict[str, Any], prefix: str) -> None:
+        for k, v in d.items():
+            if isinstance(v, dict):
+                walk(v, f"{prefix}{k}.")
+            else:
+                flat[f"{prefix}{k}"] = v
+
+    walk(data, "")
+    known = {s.name for s in param_specs()}
+    for name in flat:
+        if name not in known:
+            raise ConfigError(path, f"unknown parameter {name!r}")
+    return with_values(base or Params(), flat, str(path))
+
+
+def params_to_toml(params: Params) -> str:
+    """TOML text that :func:`load_params` reads back to an equal ``Params``."""
+    tree: dict[str, Any] = {}
+    for spec in param_specs():
+        value = get_param(params, spec.name)
+        if value is None:
+            continue
+        *groups, leaf = spec.name.split(".")
+        node = tree
+        for g in groups:
+            node = node.setdefault(g, {})
+        node[leaf] = list(value) if isinstance(value, tuple) else value
+    head = "# routefuse estimator parameters (routefuse run --config FILE)\n"
+    return head + tomli_w.dumps(tree)
+
+
+def save_params(params: Params, path: str | Path) -> None:
+    Path(path).write_text(params_to_toml(params), encoding="utf-8")
+
+
+def for_method(params: Params, method: Method) -> Params:
+    """The parameters a method runs with: ``paper`` switches every extension off."""
+    if method == "paper":
+        off = {f.name: False for f in fields(ExtensionParams)}
+        return replace(params, extensions=ExtensionParams(**off))
+    return params
