@@ -70,6 +70,12 @@ class WindowParams:
     route_search_m: float = param(
         60.0, "arc-length search radius around the previous route projection", unit="m", lo=5,
         hi=2000, step=5)
+    along_search_m: float = param(
+        30.0, "half-width of the along-track offset search of the route segment", unit="m",
+        lo=1, hi=300, step=1)
+    along_search_step_m: float = param(
+        1.0, "grid step of the along-track offset search (refined by a parabola)", unit="m",
+        lo=0.1, hi=10, step=0.1)
 
 
 @dataclass(frozen=True)
@@ -86,6 +92,18 @@ class GateParams:
         30.0, "cap on a single correction |z - p_dr|", unit="m", lo=0.5, hi=500, step=0.5)
     max_rotation_deg: float = param(
         15.0, "largest fitted rotation accepted", unit="deg", lo=0.5, hi=180, step=0.5)
+    mahalanobis_chi2: float = param(
+        13.8, "chi-square gate on the match innovation, S = P_EN + R_k (2 dof; 13.8 = 99.9 %)",
+        lo=1, hi=1000, step=0.5)
+    max_lateral_jump_m: float = param(
+        5.0, "largest move of the vehicle across the route away from its learned lane offset",
+        unit="m", lo=0.5, hi=100, step=0.5)
+    alternative_shift_m: float = param(
+        25.0, "lateral shift of the rival route segments (a parallel road or bore)", unit="m",
+        lo=2, hi=200, step=1)
+    alternative_margin: float = param(
+        2.0, "how much worse (chi-square units) every rival must fit than the candidate",
+        lo=0, hi=100, step=0.5)
 
 
 @dataclass(frozen=True)
@@ -95,6 +113,18 @@ class PseudoObsParams:
     sigma_m: float = param(
         2.0, "1-sigma of the pseudo-position (the paper's conservative, isotropic R)", unit="m",
         lo=0.05, hi=100, step=0.05)
+    cross_sigma_m: float = param(
+        1.0, "cross-track 1-sigma when R follows route geometry (raised to the fit residual)",
+        unit="m", lo=0.05, hi=100, step=0.05)
+    along_sigma_min_m: float = param(
+        0.5, "smallest along-track 1-sigma derived from route shape", unit="m", lo=0.01, hi=100,
+        step=0.05)
+    along_sigma_max_m: float = param(
+        100.0, "along-track 1-sigma where route shape does not observe it (straight road)",
+        unit="m", lo=1, hi=10000, step=1)
+    shape_noise_m: float = param(
+        0.5, "per-point noise of DR and route shape assumed when deriving the along-track "
+        "sigma", unit="m", lo=0.01, hi=20, step=0.05)
 
 
 @dataclass(frozen=True)
