@@ -184,10 +184,42 @@ class NoiseParams:
         0.5, "smallest GNSS horizontal 1-sigma trusted, whatever the message claims", unit="m",
         lo=0.01, hi=50, step=0.05)
     gnss_chi2_gate: float = param(
-        16.0, "chi-square gate on the GNSS innovation (3 dof)", lo=1, hi=1000, step=0.5)
+        16.0, "chi-square gate on the GNSS innovation, tested on horizontal (2 dof) and "
+        "vertical (1 dof) separately", lo=1, hi=1000, step=0.5)
+    gnss_sigma_default_m: float = param(
+        3.0, "GNSS horizontal 1-sigma assumed when the message carries no covariance "
+        "(vertical: twice this)", unit="m", lo=0.05, hi=100, step=0.1)
+    gnss_reset_after_s: float = param(
+        5.0, "after fixes have been rejected this long in a row, the position covariance is "
+        "widened so GNSS is trusted again", unit="s", lo=0.5, hi=600, step=0.5)
     wheel_scale_sigma: float = param(
         0.01, "initial 1-sigma of the wheel-speed scale factor error", lo=0, hi=0.2,
         step=0.001)
+    gyro_bias_init_sigma_deg_h: float = param(
+        100.0, "initial 1-sigma of the gyro bias (turn-on bias of automotive MEMS)",
+        unit="deg/h", lo=0.01, hi=10000, step=1)
+    accel_bias_init_sigma_mg: float = param(
+        10.0, "initial 1-sigma of the accelerometer bias", unit="mg", lo=0.001, hi=500,
+        step=0.5)
+    velocity_init_sigma_m_s: float = param(
+        0.5, "initial 1-sigma of the velocity", unit="m/s", lo=0.001, hi=20, step=0.05)
+    zupt_speed_m_s: float = param(
+        0.05, "wheel speed below which the vehicle counts as stopped", unit="m/s", lo=0,
+        hi=2, step=0.01)
+    zupt_gyro_deg_s: float = param(
+        1.0, "mean |gyro| over 0.5 s below which the vehicle may count as stopped",
+        unit="deg/s", lo=0, hi=20, step=0.1)
+    zupt_accel_std_m_s2: float = param(
+        0.05, "std of |accel| over 0.5 s below which a log without wheel speed counts as "
+        "stopped", unit="m/s^2", lo=0, hi=5, step=0.01)
+    zupt_sigma_m_s: float = param(
+        0.02, "zero-velocity update 1-sigma", unit="m/s", lo=0.001, hi=1, step=0.005)
+    aid_rate_hz: float = param(
+        10.0, "rate of the wheel-speed, non-holonomic and zero-velocity updates", unit="Hz",
+        lo=0.5, hi=200, step=0.5)
+    propagation_interval_s: float = param(
+        0.02, "covariance propagation interval (the state is propagated at every IMU sample)",
+        unit="s", lo=0.0, hi=0.2, step=0.005)
 
 
 @dataclass(frozen=True)
@@ -211,6 +243,12 @@ class SensorParams:
     initial_heading_deg: float | None = param(
         None, "initial heading (ENU yaw, counter-clockwise from East); None = from GNSS motion",
         unit="deg")
+    align_distance_m: float = param(
+        10.0, "GNSS fixes at least this far apart give the initial heading", unit="m", lo=1,
+        hi=200, step=1)
+    gnss_gap_s: float = param(
+        1.0, "no valid fix for longer than this is a GNSS-degraded interval", unit="s",
+        lo=0.1, hi=60, step=0.1)
 
 
 @dataclass(frozen=True)
