@@ -28,7 +28,7 @@ from numpy.typing import ArrayLike, NDArray
 
 from .log import GnssData, ImuData, TruthData, WheelData
 
-Storage = Literal["mcap", "sqlite3", "ros1"]
+Storage = Literal["mcap", "mcap-folder", "sqlite3", "ros1"]
 
 IMU_TYPE = "sensor_msgs/msg/Imu"
 FIX_TYPE = "sensor_msgs/msg/NavSatFix"
@@ -330,8 +330,9 @@ def write_bag(
     """Write the given streams to one bag and return the message count per topic.
 
     ``storage="mcap"`` writes one bare ``.mcap`` file (ROS 2 bag v9, zstd chunks),
-    ``"sqlite3"`` a ROS 2 bag folder, ``"ros1"`` a ROS 1 ``.bag``. The receive time of each
-    message is its header stamp; messages are written in time order (ties by stream).
+    ``"mcap-folder"`` and ``"sqlite3"`` a ROS 2 bag folder, ``"ros1"`` a ROS 1 ``.bag``.
+    The receive time of each message is its header stamp; messages are written in time order
+    (ties by stream).
     Arrays are written as given (NaN and duplicate stamps included), so tests can build bad logs.
     """
     out = Path(path)
@@ -411,9 +412,9 @@ def _write_streams(
     tmp = Path(tempfile.mkdtemp(prefix=".routefuse-bag-", dir=out.parent)) if bare else None
     bagdir = tmp / out.stem if tmp is not None else out
     try:
-        plugin = StoragePlugin.MCAP if bare else StoragePlugin.SQLITE3
+        plugin = StoragePlugin.SQLITE3 if storage == "sqlite3" else StoragePlugin.MCAP
         writer = Writer(bagdir, version=9, storage_plugin=plugin)
-        if bare:
+        if plugin == StoragePlugin.MCAP:
             writer.set_compression(CompressionMode.STORAGE, CompressionFormat.ZSTD)
         writer.open()
         try:

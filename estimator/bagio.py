@@ -1,0 +1,624 @@
+"""Read a ROS 1 ``.bag``, a ROS 2 bag folder (sqlite3 or mcap) or a bare ``.mcap`` into a
+:class:`Log` of numpy arrays.
+
+Topics are found by message type. Decoded arrays are cached (keyed by a hash of the file bytes,
+the topic choice and :data:`CACHE_VERSION`) so the second load of a log is near-instant.
+
+Repairs, each reported in ``Log.warnings``: samples are sorted by time, exact duplicate stamps
+are dropped (the first is kept), IMU and wheel samples with non-finite values are dropped. GNSS
+fixes without a position are kept (they mark an outage) and are invalid by ``GnssData.valid``.
+"""
+
+from __future__ import annotations
+
+import contextlib
+import dataclasses
+import hashlib
+import json
+import os
+import tempfile
+from collections.abc import Callable, Iterable
+from dataclasses import dataclass
+from pathlib import Path
+from typing import Any
+
+import numpy as np
+from numpy.typing import NDArray
+
+from .errors import LogError
+from .log import GnssData, ImuData, Log, TopicInfo, TruthData, WheelData
+
+CACHE_VERSION = 1
+MIN_IMU_SAMPLES = 10
+
+IMU_TYPES = ("sensor_msgs/msg/Imu",)
+FIX_TYPES = ("sensor_msgs/msg/NavSatFix",)
+ODOM_TYPE = "nav_msgs/msg/Odometry"
+TWIST_TYPE = "geometry_msgs/msg/TwistStamped"
+WHEEL_TYPES = (ODOM_TYPE, TWIST_TYPE)
+TF_TYPE = "tf2_msgs/msg/TFMessage"
+BODY_FRAMES = ("base_link", "base_footprint", "body")
+
+F64 = NDArray[np.float64]
+
+
+@dataclass(frozen=True)
+class TopicChoice:
+    """Topics picked by the user; ``None`` lets the loader find the topic by its type."""
+
+    imu: str | None = None
+    gnss: str | None = None
+    wheel: str | None = None
+    truth: str | None = None
+
+    @classmethod
+    def from_args(cls, args: Any) -> TopicChoice:
+        """From the ``--imu-topic`` ... options of :func:`commands._common.add_topic_options`."""
+        return cls(
+            imu=getattr(args, "imu_topic", None),
+            gnss=getattr(args, "gnss_topic", None),
+            wheel=getattr(args, "wheel_topic", None),
+            truth=getattr(args, "truth_topic", None),
+        )
+
+
+def is_truth_topic(topic: str) -> bool:
+    name = topic.lower()
+    return "truth" in name or "groundtruth" in name
+
+
+# ---------------------------------------------------------------------------------------------
+# Opening the file
+# ---------------------------------------------------------------------------------------------
+
+
+def _bag_paths(path: Path) -> Path:
+    """The path AnyReader should open, or a LogError saying why this is not a log."""
+    if not path.exists():
+        raise LogError(path, "no such file or folder")
+    if path.is_dir():
+        if not (path / "metadata.yaml").is_file():
+            raise LogError(path, "folder is not a ROS 2 bag (it has no metadata.yaml)")
+        return path
+    suffix = path.suffix.lower()
+    if suffix in (".db3", ".mcap") and (path.parent / "metadata.yaml").is_file():
+        return path.parent
+    if suffix not in (".bag", ".mcap"):
+        raise LogError(
+            path,
+            f"unknown log format '{path.suffix or path.name}': expected a ROS 1 .bag, "
+            "a .mcap file or a ROS 2 bag folder",
+        )
+    if path.stat().st_size == 0:
+        raise LogError(path, "file is empty")
+    return path
+
+
+@contextlib.contextmanager
+def _reading(path: Path) -> Any:
+    """Turn rosbags' (and the storage libraries') exceptions into one-line LogErrors."""
+    try:
+        yield
+    except LogError:
+        raise
+    except Exception as exc:
+        reason = str(exc).strip().splitlines()[0] if str(exc).strip() else type(exc).__name__
+        if reason.lower().startswith("file magic is invalid"):
+            kind = "ROS 1 bag" if path.suffix.lower() == ".bag" else "ROS 2 bag / mcap file"
+            raise LogError(path, f"not a {kind} ({reason})") from None
+        raise LogError(
+            path, f"cannot read the bag, it is truncated or corrupt ({reason})"
+        ) from None
+
+
+# ---------------------------------------------------------------------------------------------
+# Topic discovery
+# ---------------------------------------------------------------------------------------------
+
+
+@dataclass(frozen=True)
+class _Roles:
+    imu: str
+    gnss: str
+    wheel: str | None
+    truth: str | None
+    truth_pose: str | None
+    tf_static: str | None
+
+    def role_of(self, topic: str) -> str:
+        for role in ("imu", "gnss", "wheel", "truth", "truth_pose", "tf_static"):
+            if getattr(self, role) == topic:
+                return role
+        return ""
+
+
+def _listing(types: dict[str, str]) -> str:
+    return ", ".join(f"{t} ({m.split('/')[-1]})" for t, m in sorted(types.items())) or "none"
+
+
+def _pick(
+    path: Path,
+    types: dict[str, str],
+    *,
+    kind: str,
+    accepted: tuple[str, ...],
+    chosen: str | None,
+    truth: bool,
+    required: bool,
+) -> str | None:
+    if chosen is not None:
+        if chosen not in types:
+            raise LogError(path, f"no topic {chosen} (--{kind}-topic); topics: {_listing(types)}")
+        if types[chosen] not in accepted:
+            raise LogError(
+                path,
+                f"--{kind}-topic {chosen} is a {types[chosen]}, expected " + " or ".join(accepted),
+            )
+        return chosen
+    found = sorted(t for t, m in types.items() if m in accepted and is_truth_topic(t) == truth)
+    if len(found) == 1:
+        return found[0]
+    if not found:
+        if required:
+            wanted = " or ".join(a.split("/")[-1] for a in accepted)
+            raise LogError(path, f"no {kind.upper()} topic ({wanted}); topics: {_listing(types)}")
+        return None
+    raise LogError(
+        path,
+        f"several {kind} topics: {', '.join(found)}; choose one with --{kind}-topic "
+        f"(topics: {_listing(types)})",
+    )
+
+
+def _roles(path: Path, types: dict[str, str], choice: TopicChoice) -> _Roles:
+    imu = _pick(
+        path, types, kind="imu", accepted=IMU_TYPES, chosen=choice.imu, truth=False, required=True
+    )
+    gnss = _pick(
+        path, types, kind="gnss", accepted=FIX_TYPES, chosen=choice.gnss, truth=False, required=True
+    )
+    wheel = _pick(
+        path,
+        types,
+        kind="wheel",
+        accepted=WHEEL_TYPES,
+        chosen=choice.wheel,
+        truth=False,
+        required=False,
+    )
+    truth = _pick(
+        path,
+        types,
+        kind="truth",
+        accepted=FIX_TYPES,
+        chosen=choice.truth,
+        truth=True,
+        required=False,
+    )
+    poses = sorted(t for t, m in types.items() if m == ODOM_TYPE and is_truth_topic(t))
+    truth_pose = poses[0] if truth is not None and len(poses) == 1 else None
+    tf = next((t for t, m in types.items() if m == TF_TYPE and t.endswith("tf_static")), None)
+    assert imu is not None and gnss is not None
+    return _Roles(imu, gnss, wheel, truth, truth_pose, tf)
+
+
+# ---------------------------------------------------------------------------------------------
+# Decoding
+# ---------------------------------------------------------------------------------------------
+
+
+class _Columns:
+    """Preallocated float64 columns for one topic, grown if a count was wrong."""
+
+    def __init__(self, n: int, width: int) -> None:
+        self.t = np.empty(max(n, 1))
+        self.v = np.empty((max(n, 1), width))
+        self.n = 0
+        self.frame_id = ""
+
+    def row(self, t: float) -> NDArray[np.float64]:
+        if self.n == len(self.t):
+            self.t = np.resize(self.t, 2 * self.n)
+            self.v = np.resize(self.v, (2 * self.n, self.v.shape[1]))
+        self.t[self.n] = t
+        self.n += 1
+        return self.v[self.n - 1]
+
+    def arrays(self) -> tuple[F64, F64]:
+        return self.t[: self.n].copy(), self.v[: self.n].copy()
+
+
+def _stamp(msg: Any, recv_ns: int) -> float:
+    st = msg.header.stamp
+    if st.sec == 0 and st.nanosec == 0:
+        return recv_ns * 1e-9
+    return st.sec + st.nanosec * 1e-9
+
+
+def _fill_imu(col: _Columns, msg: Any, t: float) -> None:
+    r = col.row(t)
+    w, a = msg.angular_velocity, msg.linear_acceleration
+    r[0], r[1], r[2], r[3], r[4], r[5] = w.x, w.y, w.z, a.x, a.y, a.z
+
+
+def _fill_fix(col: _Columns, msg: Any, t: float) -> None:
+    r = col.row(t)
+    c = msg.position_covariance
+    r[0], r[1], r[2], r[3] = msg.latitude, msg.longitude, msg.altitude, msg.status.status
+    if msg.position_covariance_type == 0:
+        r[4] = r[5] = r[6] = np.nan
+    else:
+        r[4], r[5], r[6] = c[0], c[4], c[8]
+
+
+def _fill_odom_speed(col: _Columns, msg: Any, t: float) -> None:
+    col.row(t)[0] = msg.twist.twist.linear.x
+
+
+def _fill_twist_speed(col: _Columns, msg: Any, t: float) -> None:
+    col.row(t)[0] = msg.twist.linear.x
+
+
+def _fill_yaw(col: _Columns, msg: Any, t: float) -> None:
+    q = msg.pose.pose.orientation
+    col.row(t)[0] = np.arctan2(2.0 * (q.w * q.z + q.x * q.y), 1.0 - 2.0 * (q.y * q.y + q.z * q.z))
+
+
+_FILLERS: dict[str, tuple[Callable[[_Columns, Any, float], None], int]] = {
+    "imu": (_fill_imu, 6),
+    "gnss": (_fill_fix, 7),
+    "truth": (_fill_fix, 7),
+    "truth_pose": (_fill_yaw, 1),
+}
+
+
+def _quat_to_matrix(x: float, y: float, z: float, w: float) -> F64:
+    n = np.sqrt(x * x + y * y + z * z + w * w)
+    x, y, z, w = x / n, y / n, z / n, w / n
+    return np.array(
+        [
+            [1 - 2 * (y * y + z * z), 2 * (x * y - z * w), 2 * (x * z + y * w)],
+            [2 * (x * y + z * w), 1 - 2 * (x * x + z * z), 2 * (y * z - x * w)],
+            [2 * (x * z - y * w), 2 * (y * z + x * w), 1 - 2 * (x * x + y * y)],
+        ]
+    )
+
+
+def _frame(name: str) -> str:
+    return name.strip().lstrip("/")
+
+
+def _rotation_between(edges: Iterable[tuple[str, str, F64]], body: str, target: str) -> F64 | None:
+    """R such that v_body = R @ v_target, walking the static transform tree both ways."""
+    graph: dict[str, list[tuple[str, F64]]] = {}
+    for parent, child, r_parent_child in edges:
+        graph.setdefault(parent, []).append((child, r_parent_child))
+        graph.setdefault(child, []).append((parent, r_parent_child.T))
+    rot = {body: np.eye(3)}
+    todo = [body]
+    while todo:
+        frame = todo.pop()
+        for other, r in graph.get(frame, []):
+            if other not in rot:
+                rot[other] = rot[frame] @ r
+                todo.append(other)
+    return rot.get(target)
+
+
+def _decode(
+    path: Path, reader: Any, roles: _Roles, progress: Callable[[float], None] | None
+) -> dict[str, Any]:
+    by_topic: dict[str, list[Any]] = {}
+    for conn in reader.connections:
+        by_topic.setdefault(conn.topic, []).append(conn)
+    cols: dict[str, _Columns] = {}
+    fill: dict[str, Callable[[_Columns, Any, float], None]] = {}
+    for role in ("imu", "gnss", "wheel", "truth", "truth_pose"):
+        topic = getattr(roles, role)
+        if topic is None:
+            continue
+        conns = by_topic[topic]
+        if role == "wheel":
+            fn, width = (
+                (_fill_twist_speed, 1) if conns[0].msgtype == TWIST_TYPE else (_fill_odom_speed, 1)
+            )
+        else:
+            fn, width = _FILLERS[role]
+        cols[topic] = _Columns(sum(int(c.msgcount or 0) for c in conns), width)
+        fill[topic] = fn
+    wanted = [c for t in (*cols, roles.tf_static) if t is not None for c in by_topic[t]]
+    total = max(sum(int(c.msgcount or 0) for c in wanted), 1)
+    step = max(total // 100, 1000)
+    edges: list[tuple[str, str, F64]] = []
+    wheel_child = ""
+    for done, (conn, recv_ns, raw) in enumerate(reader.messages(connections=wanted), 1):
+        msg = reader.deserialize(raw, conn.msgtype)
+        if conn.topic == roles.tf_static:
+            for tf in msg.transforms:
+                r = tf.transform.rotation
+                edges.append(
+                    (
+                        _frame(tf.header.frame_id),
+                        _frame(tf.child_frame_id),
+                        _quat_to_matrix(r.x, r.y, r.z, r.w),
+                    )
+                )
+        else:
+            col = cols[conn.topic]
+            if not col.n:
+                col.frame_id = _frame(msg.header.frame_id)
+                if conn.topic == roles.wheel and conn.msgtype == ODOM_TYPE:
+                    wheel_child = _frame(msg.child_frame_id)
+            fill[conn.topic](col, msg, _stamp(msg, recv_ns))
+        if progress is not None and done % step == 0:
+            progress(min(done / total, 0.99))
+    out: dict[str, Any] = {
+        role: cols[t]
+        for role in ("imu", "gnss", "wheel", "truth", "truth_pose")
+        if (t := getattr(roles, role)) is not None
+    }
+    out["edges"] = edges
+    out["body_candidates"] = [f for f in (wheel_child, *BODY_FRAMES) if f]
+    return out
+
+
+# ---------------------------------------------------------------------------------------------
+# Repair and assembly
+# ---------------------------------------------------------------------------------------------
+
+
+def _clean(
+    name: str, t: F64, v: F64, warnings: list[str], *, drop_nonfinite: bool
+) -> tuple[F64, F64]:
+    order = np.argsort(t, kind="stable")
+    if np.any(order != np.arange(len(t))):
+        moved = int(np.count_nonzero(np.diff(t) < 0))
+        warnings.append(f"{name}: {moved} samples out of time order, sorted by stamp")
+        t, v = t[order], v[order]
+    dup = np.r_[False, np.diff(t) == 0]
+    if dup.any():
+        warnings.append(f"{name}: dropped {int(dup.sum())} samples with a repeated stamp")
+        t, v = t[~dup], v[~dup]
+    bad = ~np.isfinite(t)
+    if drop_nonfinite:
+        bad |= ~np.all(np.isfinite(v), axis=1)
+    if bad.any():
+        warnings.append(f"{name}: dropped {int(bad.sum())} samples with non-finite values")
+        t, v = t[~bad], v[~bad]
+    return t, v
+
+
+def _assemble(
+    path: Path, roles: _Roles, raw: dict[str, Any], types: dict[str, str], counts: dict[str, int]
+) -> Log:
+    warnings: list[str] = []
+    imu_col: _Columns = raw["imu"]
+    t, v = _clean(f"IMU {roles.imu}", *imu_col.arrays(), warnings, drop_nonfinite=True)
+    if len(t) < MIN_IMU_SAMPLES:
+        raise LogError(
+            path, f"too few IMU samples on {roles.imu}: {len(t)} (need at least {MIN_IMU_SAMPLES})"
+        )
+    gyro, accel = v[:, :3], v[:, 3:6]
+    imu_frame = imu_col.frame_id
+    body = next((b for b in raw["body_candidates"] if b), "base_link")
+    if raw["edges"] and imu_frame and imu_frame != body:
+        rot = _rotation_between(raw["edges"], body, imu_frame)
+        if rot is not None:
+            gyro, accel = gyro @ rot.T, accel @ rot.T
+            warnings.append(f"IMU rotated from {imu_frame} into {body} by /tf_static")
+        else:
+            warnings.append(f"IMU frame {imu_frame}: no /tf_static path to {body}, not rotated")
+    imu = ImuData(t, np.ascontiguousarray(gyro), np.ascontiguousarray(accel))
+
+    gnss_col: _Columns = raw["gnss"]
+    gt, gv = _clean(f"GNSS {roles.gnss}", *gnss_col.arrays(), warnings, drop_nonfinite=False)
+    if len(gt) == 0:
+        raise LogError(path, f"GNSS topic {roles.gnss} has no messages")
+    gnss = _gnss(gt, gv)
+    if not gnss.valid.any():
+        warnings.append(f"GNSS {roles.gnss}: no valid fix in the whole log")
+
+    wheel = None
+    if "wheel" in raw:
+        wt, wv = _clean(
+            f"wheel {roles.wheel}", *raw["wheel"].arrays(), warnings, drop_nonfinite=True
+        )
+        wheel = WheelData(wt, wv[:, 0].copy()) if len(wt) else None
+
+    truth = None
+    if "truth" in raw:
+        tt, tv = _clean(
+            f"truth {roles.truth}", *raw["truth"].arrays(), warnings, drop_nonfinite=False
+        )
+        heading = np.full(len(tt), np.nan)
+        if "truth_pose" in raw:
+            pt, pv = _clean(
+                f"truth {roles.truth_pose}",
+                *raw["truth_pose"].arrays(),
+                warnings,
+                drop_nonfinite=True,
+            )
+            if len(pt):
+                yaw = np.unwrap(pv[:, 0])
+                inside = (tt >= pt[0]) & (tt <= pt[-1])
+                heading[inside] = np.angle(np.exp(1j * np.interp(tt[inside], pt, yaw)))
+        if len(tt):
+            truth = TruthData(tt, tv[:, 0].copy(), tv[:, 1].copy(), tv[:, 2].copy(), heading)
+
+    topics = tuple(
+        TopicInfo(topic, types[topic], counts[topic], roles.role_of(topic))
+        for topic in sorted(types)
+    )
+    return Log(str(path), imu, gnss, wheel, truth, topics, tuple(warnings))
+
+
+def _gnss(t: F64, v: F64) -> GnssData:
+    status = np.where(np.isfinite(v[:, 3]), v[:, 3], -1).astype(np.int8)
+    lat, lon, alt = v[:, 0].copy(), v[:, 1].copy(), v[:, 2].copy()
+    no_pos = ~(np.isfinite(lat) & np.isfinite(lon) & np.isfinite(alt))
+    status[no_pos] = -1
+    cov = v[:, 4:7].copy()
+    cov[status < 0] = np.nan
+    return GnssData(t, lat, lon, alt, status, cov)
+
+
+# ---------------------------------------------------------------------------------------------
+# Cache
+# ---------------------------------------------------------------------------------------------
+
+
+def default_cache_dir() -> Path:
+    """``$ROUTEFUSE_CACHE_DIR``, else ``$XDG_CACHE_HOME/routefuse``, else ``~/.cache/routefuse``."""
+    if env := os.environ.get("ROUTEFUSE_CACHE_DIR"):
+        return Path(env)
+    if xdg := os.environ.get("XDG_CACHE_HOME"):
+        return Path(xdg) / "routefuse"
+    return Path.home() / ".cache" / "routefuse"
+
+
+def _files_of(path: Path) -> list[Path]:
+    return sorted(p for p in path.rglob("*") if p.is_file()) if path.is_dir() else [path]
+
+
+def _content_hash(path: Path, cache: Path | None) -> str:
+    """sha256 of the log's bytes; a (path, size, mtime) memo in the cache skips re-hashing."""
+    files = _files_of(path)
+    stat_key = hashlib.sha256(
+        json.dumps(
+            [[str(f.resolve()), f.stat().st_size, f.stat().st_mtime_ns] for f in files]
+        ).encode()
+    ).hexdigest()[:32]
+    memo = cache / f"stat-{stat_key}.txt" if cache is not None else None
+    if memo is not None and memo.is_file():
+        text = memo.read_text().strip()
+        if len(text) == 64:
+            return text
+    h = hashlib.sha256()
+    for f in files:
+        h.update(str(f.relative_to(path) if path.is_dir() else "").encode())
+        with f.open("rb") as fh:
+            while chunk := fh.read(1 << 20):
+                h.update(chunk)
+    digest = h.hexdigest()
+    if memo is not None:
+        _atomic_write(memo, digest.encode())
+    return digest
+
+
+def _atomic_write(target: Path, data: bytes) -> None:
+    with contextlib.suppress(OSError):
+        target.parent.mkdir(parents=True, exist_ok=True)
+        fd, tmp = tempfile.mkstemp(dir=target.parent, prefix=".tmp-")
+        with os.fdopen(fd, "wb") as fh:
+            fh.write(data)
+        os.replace(tmp, target)
+
+
+def _to_npz(log: Log) -> dict[str, Any]:
+    arrays: dict[str, Any] = {}
+    for name in ("imu", "gnss", "wheel", "truth"):
+        part = getattr(log, name)
+        if part is not None:
+            for f in dataclasses.fields(part):
+                arrays[f"{name}.{f.name}"] = getattr(part, f.name)
+    meta = {"topics": [dataclasses.asdict(t) for t in log.topics], "warnings": list(log.warnings)}
+    arrays["meta"] = np.array(json.dumps(meta))
+    return arrays
+
+
+def _from_npz(path: Path, data: Any) -> Log:
+    def part(name: str, cls: type) -> Any:
+        keys = [f.name for f in dataclasses.fields(cls)]
+        if f"{name}.{keys[0]}" not in data:
+            return None
+        return cls(**{k: data[f"{name}.{k}"] for k in keys})
+
+    meta = json.loads(str(data["meta"]))
+    return Log(
+        str(path),
+        part("imu", ImuData),
+        part("gnss", GnssData),
+        part("wheel", WheelData),
+        part("truth", TruthData),
+        tuple(TopicInfo(**t) for t in meta["topics"]),
+        tuple(meta["warnings"]),
+    )
+
+
+def _save(target: Path, log: Log) -> None:
+    with contextlib.suppress(OSError):
+        target.parent.mkdir(parents=True, exist_ok=True)
+        fd, tmp = tempfile.mkstemp(dir=target.parent, prefix=".tmp-", suffix=".npz")
+        with os.fdopen(fd, "wb") as fh:
+            np.savez(fh, **_to_npz(log))
+        os.replace(tmp, target)
+
+
+# ---------------------------------------------------------------------------------------------
+# Public entry point
+# ---------------------------------------------------------------------------------------------
+
+
+def load_log(
+    path: str | Path,
+    *,
+    topics: TopicChoice = TopicChoice(),
+    cache_dir: Path | None = None,
+    progress: Callable[[float], None] | None = None,
+) -> Log:
+    """Decode a log into numpy arrays (from the cache when this file was decoded before).
+
+    Raises :class:`LogError` (one line naming the file) for anything that is not a readable
+    bag with an IMU and a GNSS topic.
+    """
+    path = Path(path)
+    bag = _bag_paths(path)
+    cache = cache_dir if cache_dir is not None else default_cache_dir()
+    key = hashlib.sha256(
+        json.dumps([_content_hash(bag, cache), dataclasses.astuple(topics), CACHE_VERSION]).encode()
+    ).hexdigest()[:40]
+    entry = cache / f"log-{key}.npz"
+    if entry.is_file():
+        try:
+            with np.load(entry, allow_pickle=False) as data:
+                log = _from_npz(path, data)
+            if progress is not None:
+                progress(1.0)
+            return log
+        except (OSError, ValueError, KeyError, TypeError):
+            pass
+    log = _read(path, bag, topics, progress)
+    _save(entry, log)
+    if progress is not None:
+        progress(1.0)
+    return log
+
+
+def _read(
+    path: Path, bag: Path, choice: TopicChoice, progress: Callable[[float], None] | None
+) -> Log:
+    from rosbags.highlevel import AnyReader
+
+    with _reading(path), AnyReader([bag]) as reader:
+        types: dict[str, str] = {}
+        counts: dict[str, int] = {}
+        for conn in reader.connections:
+            types.setdefault(conn.topic, conn.msgtype)
+            counts[conn.topic] = counts.get(conn.topic, 0) + int(conn.msgcount or 0)
+        roles = _roles(path, types, choice)
+        raw = _decode(path, reader, roles, progress)
+    return _assemble(path, roles, raw, types, counts)
+
+
+def describe_topics(path: str | Path) -> dict[str, tuple[str, int]]:
+    """Topic -> (message type, count) without decoding messages (for error messages, info)."""
+    p = Path(path)
+    bag = _bag_paths(p)
+    from rosbags.highlevel import AnyReader
+
+    out: dict[str, tuple[str, int]] = {}
+    with _reading(p), AnyReader([bag]) as reader:
+        for conn in reader.connections:
+            mtype, n = out.get(conn.topic, (conn.msgtype, 0))
+            out[conn.topic] = (mtype, n + int(conn.msgcount or 0))
+    return out
