@@ -38,7 +38,9 @@ class LocalFrame:
     def __post_init__(self) -> None:
         if not (np.isfinite(self.lat0) and np.isfinite(self.lon0) and np.isfinite(self.h0)):
             raise ValueError(f"local frame origin is not finite: {self.lat0}, {self.lon0}")
-        pipeline = _PIPELINE.format(lat=repr(self.lat0), lon=repr(self.lon0), h=repr(self.h0))
+        pipeline = _PIPELINE.format(
+            lat=repr(float(self.lat0)), lon=repr(float(self.lon0)), h=repr(float(self.h0))
+        )
         object.__setattr__(self, "_transformer", pyproj.Transformer.from_pipeline(pipeline))
 
     def to_enu(
