@@ -130,3 +130,6 @@ class Run:
     t0: float
     """log start, s (so times can be shown relative to it)"""
     warnings: tuple[str, ...] = ()
+    resume: object = field(default=None, repr=False, compare=False)
+    """opaque checkpoints that let ``runner.run(..., reuse=this_run)`` restart at the first
+    match attempt a parameter change affects; None when the run kept none"""
