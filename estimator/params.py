@@ -150,6 +150,9 @@ class ExtensionParams:
         "innovation is improbable (Mahalanobis)")
     along_track_search: bool = param(
         True, "search the route arc-length offset that minimises the residual")
+    lane_path_matching: bool = param(
+        True, "register the window to the route shifted by the learned lane offset (the lane's "
+        "own arc length on curves) instead of adding the offset after the fit")
     heading_observation: bool = param(False, "feed the fitted rotation as a heading observation")
     robust_gnss: bool = param(
         True, "test fixes against dead-reckoned motion; drop disagreeing fixes before outages")

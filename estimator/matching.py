@@ -1,0 +1,675 @@
+"""The route match of one window: the paper's shape registration plus routefuse's validation.
+
+The last ``window.length_m`` of dead-reckoned travel is resampled at a fixed spacing, paired by
+arc length with the route segment that starts where the window's first point projects, and
+registered to it with a rigid 2-D transform (Kabsch). The current DR position mapped by that
+transform, shifted by the learned lane offset, is the pseudo-position the filter is updated with.
+
+Beyond the paper (each switchable in :class:`~estimator.params.ExtensionParams`): the route
+segment's arc-length offset is searched, so route shape can correct along-track drift where the
+road bends; the observation covariance follows the route geometry, so a straight road says
+"along-track unknown" instead of pretending; and a candidate is validated against the filter's
+own covariance, the lane the vehicle was in, and laterally shifted and reversed rivals, because a
+parallel carriageway has the same shape and would pass every shape gate.
+
+Every intermediate and every gate goes into a :class:`~estimator.results.MatchRecord`.
+"""
+
+from __future__ import annotations
+
+from dataclasses import dataclass
+from typing import Literal
+
+import numpy as np
+from numba import njit
+from numpy.typing import ArrayLike, NDArray
+
+from .errors import RouteError, RoutefuseError
+from .params import Params
+from .results import Comparison, GateDecision, MatchRecord
+from .route import Route
+
+F64 = NDArray[np.float64]
+
+GATE_NAMES = (
+    "min_pairs",
+    "heading",
+    "residual",
+    "rotation",
+    "mahalanobis",
+    "lane_continuity",
+    "alternative_left",
+    "alternative_right",
+    "alternative_reversed",
+    "correction_cap",
+)
+"""Every gate a match record can hold, in the order they are evaluated."""
+
+
+def resample_polyline(
+    xy: ArrayLike, spacing: float, *, anchor: Literal["start", "end"] = "end"
+) -> F64:
+    """Points every ``spacing`` metres of arc length along a polyline, in its order.
+
+    Removes the effect of speed and sampling rate on the window's shape. With ``anchor="end"``
+    the last point is the polyline's last point (the current position), so the terminal pair
+    and ``p_ref`` refer to where the vehicle is now; the first point is up to one spacing after
+    the polyline's start.
+    """
+    p = np.asarray(xy, np.float64)[:, :2]
+    c = np.r_[0.0, np.cumsum(np.hypot(*np.diff(p, axis=0).T))]
+    total = float(c[-1])
+    n = int(np.floor(total / spacing + 1e-9)) + 1
+    steps = spacing * np.arange(n)
+    at = total - steps[::-1] if anchor == "end" else steps
+    return np.column_stack([np.interp(at, c, p[:, 0]), np.interp(at, c, p[:, 1])])
+
+
+def kabsch_2d(src: ArrayLike, dst: ArrayLike, weights: ArrayLike | None = None) -> tuple[F64, F64]:
+    """The proper rotation R and translation t minimising sum w_i |R src_i + t - dst_i|^2.
+
+    SVD of the cross-covariance C = U S V^T, R = V diag(1, det(V U^T)) U^T: the diagonal guard
+    refuses reflections, so a mirrored shape is fitted by the best rotation, with its residual.
+    Accepts (n, 2) arrays or stacks (k, n, 2); returns R (…, 2, 2) and t (…, 2).
+    """
+    s = np.asarray(src, np.float64)
+    d = np.asarray(dst, np.float64)
+    single = s.ndim == 2 and d.ndim == 2
+    d3 = d[None] if d.ndim == 2 else d
+    s3 = np.broadcast_to(s[None] if s.ndim == 2 else s, d3.shape)
+    w = (
+        np.ones(d3.shape[:2])
+        if weights is None
+        else np.broadcast_to(np.asarray(weights, np.float64), d3.shape[:2])
+    )
+    rot, trans, _ = _kabsch(s3, d3, w)
+    return (rot[0], trans[0]) if single else (rot, trans)
+
+
+def _kabsch(src: F64, dst: F64, w: F64) -> tuple[F64, F64, F64]:
+    """Batched weighted Kabsch: R (k, 2, 2), t (k, 2) and the weighted mean squared residual."""
+    wsum = np.maximum(w.sum(axis=1), 1e-300)
+    w3 = w[:, :, None]
+    cs = (w3 * src).sum(axis=1) / wsum[:, None]
+    ct = (w3 * dst).sum(axis=1) / wsum[:, None]
+    a = src - cs[:, None]
+    b = dst - ct[:, None]
+    aw = w3 * a
+    cov = np.swapaxes(aw, 1, 2) @ b
+    u, _, vt = np.linalg.svd(cov)
+    v = np.swapaxes(vt, 1, 2).copy()
+    ut = np.swapaxes(u, 1, 2)
+    sign = np.sign(np.linalg.det(v @ ut))
+    sign[sign == 0] = 1.0
+    v[:, :, 1] *= sign[:, None]
+    rot = v @ ut
+    trans = ct - (rot @ cs[:, :, None])[:, :, 0]
+    # sum w |R a - b|^2 = sum w |a|^2 + sum w |b|^2 - 2 tr(R C)
+    sq = (aw * a).sum(axis=(1, 2)) + (w3 * b * b).sum(axis=(1, 2))
+    tr = np.einsum("kij,kji->k", rot, cov)
+    ms = np.maximum(sq - 2.0 * tr, 0.0) / wsum
+    return rot, trans, ms
+
+
+def shifted_route(
+    route: Route, lateral_m: float, *, s0: float = 0.0, s1: float | None = None
+) -> Route:
+    """The part of ``route`` between two arc lengths, offset sideways (positive = to the left).
+
+    Vertices move along their miter direction, so each segment stays parallel to the original
+    at exactly ``lateral_m`` (a parallel carriageway), with the miter length capped at hairpins.
+    """
+    end = route.length if s1 is None else s1
+    pts = route.segment(s0, end)
+    seg = np.diff(pts, axis=0)
+    seglen = np.hypot(seg[:, 0], seg[:, 1])
+    keep = seglen > 1e-9
+    if not keep.any():
+        raise RouteError(route.source or None, "route piece to shift has no length")
+    pts = np.vstack([pts[:1], pts[1:][keep]])
+    u = np.diff(pts, axis=0)
+    u /= np.hypot(u[:, 0], u[:, 1])[:, None]
+    nrm = np.column_stack([-u[:, 1], u[:, 0]])
+    miter = np.empty_like(pts)
+    miter[0], miter[-1] = nrm[0], nrm[-1]
+    if len(nrm) > 1:
+        cos = np.einsum("ij,ij->i", nrm[:-1], nrm[1:])
+        miter[1:-1] = (nrm[:-1] + nrm[1:]) / np.maximum(1.0 + cos, 0.5)[:, None]
+    return Route(pts + lateral_m * miter, name=route.name, source=route.source)
+
+
+def route_arc_length(
+    route: Route, xy: ArrayLike, *, s_guess: float | None = None, params: Params
+) -> float:
+    """Route arc length of a position, searched within ``window.route_search_m`` of ``s_guess``
+    (globally when None), so the runner can track where on the route the vehicle is."""
+    p = np.asarray(xy, np.float64).reshape(-1)[:2]
+    if not np.all(np.isfinite(p)):
+        raise RoutefuseError(None, "route match: position to project is not finite")
+    if s_guess is None:
+        return float(route.project(p).s[0])
+    return float(route.project(p, s_guess, params.window.route_search_m).s[0])
+
+
+def learn_lane_offset(
+    t: ArrayLike,
+    xy: ArrayLike,
+    gnss_used: ArrayLike,
+    route: Route,
+    *,
+    t_end: float,
+    params: Params,
+    s_guess: float | None = None,
+) -> float:
+    """The vehicle's lateral offset from the route (m, positive = vehicle LEFT of the route),
+    exponentially weighted with ``offset.time_constant_s`` over the good-GNSS epochs up to
+    ``t_end``: a lane is not the road centreline, and the pseudo-position should keep the lane.
+
+    0 when offset compensation is off, when no epoch is usable (no GNSS, off the route's ends),
+    or when the offset is larger than ``offset.max_offset_m`` (the vehicle is not on this road).
+    """
+    op = params.offset
+    if not op.enabled:
+        return 0.0
+    t_a = np.asarray(t, np.float64).reshape(-1)
+    p = np.asarray(xy, np.float64).reshape(len(t_a), -1)[:, :2]
+    used = np.asarray(gnss_used, bool).reshape(-1)
+    horizon = 5.0 * op.time_constant_s
+    sel = (
+        used
+        & (t_a <= t_end)
+        & (t_a >= t_end - horizon)
+        & np.isfinite(t_a)
+        & np.all(np.isfinite(p), axis=1)
+    )
+    if not sel.any():
+        return 0.0
+    pts, ts = p[sel], t_a[sel]
+    if s_guess is None:
+        proj = route.project(pts)
+    else:
+        travel = float(np.sum(np.hypot(*np.diff(pts, axis=0).T))) if len(pts) > 1 else 0.0
+        proj = route.project(pts, s_guess, travel + params.window.route_search_m)
+    inside = (proj.s > 1e-6) & (proj.s < route.length - 1e-6)
+    if not inside.any():
+        return 0.0
+    w = np.exp(-(t_end - ts[inside]) / op.time_constant_s)
+    offset = float(np.sum(w * proj.lateral[inside]) / np.sum(w))
+    if not np.isfinite(offset) or abs(offset) > op.max_offset_m:
+        return 0.0
+    return offset
+
+
+@dataclass(frozen=True)
+class _Fit:
+    """One route candidate registered to the window."""
+
+    s_first: float
+    """arc length (on the candidate's route) of the first pair"""
+    valid: NDArray[np.bool_]
+    route_points: F64
+    rotation: F64
+    translation: F64
+    residual: float
+    n_pairs: int
+    heading_cos: float
+    along_offset: float
+    along_curvature: float
+    along_sigma: float
+    along_observed: bool
+    p_ref: F64
+    s_ref: float
+    tangent: F64
+    normal: F64
+    z: F64
+    obs_cov: F64
+
+    @property
+    def angle(self) -> float:
+        return float(np.arctan2(self.rotation[1, 0], self.rotation[0, 0]))
+
+
+@njit(cache=True)
+def _scan_kernel(
+    win: F64, rxy: F64, rs: F64, s_anchor: float, deltas: F64, spacing: float, ms: F64, m: F64
+) -> None:
+    """Mean squared rigid-fit residual of the window against the route at each offset.
+
+    The optimum over SO(2) has tr(R C) = |(C00 + C11, C01 - C10)|, the same value the SVD
+    solution with the reflection guard reaches, so the scan needs no rotation at all.
+    """
+    n = win.shape[0]
+    nseg = rxy.shape[0] - 1
+    length = rs[nseg]
+    ox, oy = win[0, 0], win[0, 1]
+    for k in range(deltas.shape[0]):
+        sw = 0.0
+        sax = say = sbx = sby = 0.0
+        saa = sbb = c00 = c01 = c10 = c11 = 0.0
+        j = 0
+        for i in range(n):
+            s = s_anchor + deltas[k] + spacing * i
+            if s < -1e-6 or s > length + 1e-6:
+                continue
+            while j < nseg - 1 and rs[j + 1] <= s:
+                j += 1
+            f = (s - rs[j]) / (rs[j + 1] - rs[j])
+            qx = rxy[j, 0] + f * (rxy[j + 1, 0] - rxy[j, 0]) - ox
+            qy = rxy[j, 1] + f * (rxy[j + 1, 1] - rxy[j, 1]) - oy
+            px = win[i, 0] - ox
+            py = win[i, 1] - oy
+            sw += 1.0
+            sax += px
+            say += py
+            sbx += qx
+            sby += qy
+            saa += px * px + py * py
+            sbb += qx * qx + qy * qy
+            c00 += px * qx
+            c01 += px * qy
+            c10 += py * qx
+            c11 += py * qy
+        m[k] = sw
+        if sw < 3:
+            ms[k] = np.inf
+            continue
+        ax, ay, bx, by = sax / sw, say / sw, sbx / sw, sby / sw
+        saa -= sw * (ax * ax + ay * ay)
+        sbb -= sw * (bx * bx + by * by)
+        c00 -= sw * ax * bx
+        c01 -= sw * ax * by
+        c10 -= sw * ay * bx
+        c11 -= sw * ay * by
+        tr = np.hypot(c00 + c11, c01 - c10)
+        ms[k] = max(saa + sbb - 2.0 * tr, 0.0) / sw
+
+
+def _scan(win: F64, route: Route, s_anchor: float, deltas: F64, spacing: float) -> tuple[F64, F64]:
+    """Mean squared residual and number of valid pairs at each arc-length offset."""
+    ms = np.empty(len(deltas))
+    m = np.empty(len(deltas))
+    _scan_kernel(
+        np.ascontiguousarray(win),
+        route.xy,
+        route.s,
+        float(s_anchor),
+        np.ascontiguousarray(deltas, np.float64),
+        float(spacing),
+        ms,
+        m,
+    )
+    return ms, m
+
+
+def _pairs(
+    win: F64, route: Route, s_first: float, spacing: float
+) -> tuple[F64, NDArray[np.bool_], F64, F64, F64, float]:
+    """The pairs at one offset, registered with the SVD Kabsch fit."""
+    s = s_first + spacing * np.arange(len(win))
+    valid = (s >= -1e-6) & (s <= route.length + 1e-6)
+    q = route.point_at(s)
+    rot, trans, ms = _kabsch(win[None], q[None], valid[None].astype(np.float64))
+    return s, valid, q, rot[0], trans[0], float(np.sqrt(ms[0]))
+
+
+def _fit(
+    win: F64,
+    p_dr: F64,
+    route: Route,
+    s_anchor: float,
+    lane_offset: float,
+    params: Params,
+) -> _Fit | None:
+    """Register the window to one route candidate; None when fewer than 2 pairs exist."""
+    ext = params.extensions
+    h = params.window.spacing_m
+    po = params.pseudo
+    step = params.window.along_search_step_m
+    half = params.window.along_search_m
+    if ext.along_track_search:
+        k_half = max(int(np.ceil(half / step)), 1)
+        deltas = step * np.arange(-k_half, k_half + 1, dtype=np.float64)
+    elif ext.geometry_covariance:
+        deltas = np.array([-step, 0.0, step])
+    else:
+        deltas = np.zeros(1)
+    ms, m = _scan(win, route, s_anchor, deltas, h)
+
+    offset, curvature, sigma = 0.0, 0.0, float("inf")
+    k = int(np.argmin(ms)) if ext.along_track_search else len(deltas) // 2
+    if 0 < k < len(deltas) - 1 and np.all(np.isfinite(ms[k - 1 : k + 2])):
+        jm, j0, jp = ms[k - 1], ms[k], ms[k + 1]
+        curvature = float((jm - 2.0 * j0 + jp) / step**2)
+        if curvature > 0:
+            if ext.along_track_search:
+                offset = float(deltas[k] + 0.5 * step * (jm - jp) / (jm - 2.0 * j0 + jp))
+            noise2 = max(float(j0) / 2.0, po.shape_noise_m**2)
+            sigma = float(np.sqrt(2.0 * noise2 / (max(m[k], 1.0) * curvature)))
+    observed = sigma < po.along_sigma_max_m
+    if ext.along_track_search and (not observed or sigma > half / 2 or abs(offset) > half):
+        offset, observed = 0.0, False
+    sigma = float(max(sigma, po.along_sigma_min_m)) if observed else po.along_sigma_max_m
+
+    s, valid, q, rot, trans, residual = _pairs(win, route, s_anchor + offset, h)
+    idx = np.flatnonzero(valid)
+    n_pairs = len(idx)
+    if n_pairs < 2:
+        return None
+    i1, i0 = idx[-1], idx[-2]
+    d_s = win[i1] - win[i0]
+    d_t = q[i1] - q[i0]
+    norm = float(np.hypot(*d_s) * np.hypot(*d_t))
+    heading_cos = float(np.dot(d_s, d_t) / norm) if norm > 0 else -1.0
+
+    p_ref = rot @ p_dr + trans
+    s_end = float(s[i1])
+    s_ref = s_end + float((p_ref - q[i1]) @ route.tangent_at(s_end)[0])
+    tangent = route.tangent_at(s_ref)[0]
+    normal = np.array([-tangent[1], tangent[0]])
+    z = p_ref + lane_offset * normal
+    if ext.geometry_covariance:
+        cross = max(po.cross_sigma_m, residual)
+        basis = np.column_stack([tangent, normal])
+        obs_cov = basis @ np.diag([sigma**2, cross**2]) @ basis.T
+    else:
+        obs_cov = po.sigma_m**2 * np.eye(2)
+    return _Fit(
+        s_first=float(s[idx[0]]),
+        valid=valid,
+        route_points=q,
+        rotation=rot,
+        translation=trans,
+        residual=residual,
+        n_pairs=n_pairs,
+        heading_cos=heading_cos,
+        along_offset=offset,
+        along_curvature=curvature,
+        along_sigma=sigma,
+        along_observed=observed,
+        p_ref=p_ref,
+        s_ref=s_ref,
+        tangent=tangent,
+        normal=normal,
+        z=z,
+        obs_cov=obs_cov,
+    )
+
+
+def _gate(
+    name: str, value: float, threshold: float, comparison: Comparison, note: str = ""
+) -> GateDecision:
+    passed = bool(value <= threshold) if comparison == "<=" else bool(value >= threshold)
+    return GateDecision(name, float(value), float(threshold), comparison, passed, note)
+
+
+def _shape_gates(fit: _Fit, params: Params) -> list[GateDecision]:
+    g = params.gates
+    return [
+        _gate("min_pairs", fit.n_pairs, g.min_pairs, ">=", "valid window/route point pairs"),
+        _gate(
+            "heading",
+            fit.heading_cos,
+            float(np.cos(np.radians(g.max_heading_diff_deg))),
+            ">=",
+            "signed cosine between DR and route end directions",
+        ),
+        _gate("residual", fit.residual, g.max_residual_m, "<=", "RMS of the rigid fit, m"),
+        _gate(
+            "rotation",
+            float(np.degrees(abs(fit.angle))),
+            g.max_rotation_deg,
+            "<=",
+            "fitted rotation, deg",
+        ),
+    ]
+
+
+def _mahalanobis2(nu: F64, cov: F64) -> float:
+    try:
+        return float(nu @ np.linalg.solve(cov, nu))
+    except np.linalg.LinAlgError:
+        return float("inf")
+
+
+def _rival_cost(fit: _Fit, p_dr: F64, pos_cov2: F64, params: Params) -> float:
+    """How badly a candidate explains the window: innovation chi-square plus fit quality."""
+    nu = fit.z - p_dr
+    return (
+        _mahalanobis2(nu, pos_cov2 + fit.obs_cov)
+        + (fit.residual / params.pseudo.shape_noise_m) ** 2
+    )
+
+
+def _piece(
+    route: Route, lateral_m: float, lo: float, hi: float, *, reverse: bool = False
+) -> Route | None:
+    """A local candidate road: the route between two arc lengths, shifted, maybe reversed."""
+    lo, hi = max(lo, 0.0), min(hi, route.length)
+    if hi - lo <= 1e-3:
+        return None
+    try:
+        piece = (
+            shifted_route(route, lateral_m, s0=lo, s1=hi)
+            if lateral_m
+            else Route(route.segment(lo, hi), name=route.name, source=route.source)
+        )
+        if reverse:
+            piece = Route(piece.xy[::-1], name=route.name, source=route.source)
+    except RouteError:
+        return None
+    return piece
+
+
+def _rivals(
+    win: F64,
+    p_dr: F64,
+    route: Route,
+    s_anchor: float,
+    lane: float,
+    lane_path: bool,
+    params: Params,
+) -> dict[str, _Fit | None]:
+    """The same window registered to the route shifted left, right, and driven backwards."""
+    h = params.window.spacing_m
+    span = (len(win) - 1) * h
+    pad = params.window.along_search_m + 2.0 * h
+    shift = params.gates.alternative_shift_m
+    base, z_lane = (lane, 0.0) if lane_path else (0.0, lane)
+    pieces = {
+        "left": _piece(route, base + shift, s_anchor - pad, s_anchor + span + pad),
+        "right": _piece(route, base - shift, s_anchor - pad, s_anchor + span + pad),
+        # driven the other way, the lane lies on the other side of the centreline
+        "reversed": _piece(route, -base, s_anchor - span - pad, s_anchor + pad, reverse=True),
+    }
+    out: dict[str, _Fit | None] = {}
+    for name, piece in pieces.items():
+        if piece is None:
+            out[name] = None
+            continue
+        out[name] = _fit(win, p_dr, piece, float(piece.project(win[0]).s[0]), z_lane, params)
+    return out
+
+
+def _check_inputs(
+    window_xy: ArrayLike, p_dr: ArrayLike, pos_cov2: ArrayLike
+) -> tuple[F64, F64, F64]:
+    w = np.asarray(window_xy, np.float64)
+    if w.ndim != 2 or w.shape[1] < 2 or len(w) < 1:
+        raise RoutefuseError(None, f"route match: window must be (N, 2) positions, got {w.shape}")
+    w = w[:, :2]
+    p = np.asarray(p_dr, np.float64).reshape(-1)[:2]
+    cov = np.asarray(pos_cov2, np.float64)
+    if cov.shape != (2, 2):
+        raise RoutefuseError(None, f"route match: position covariance must be 2x2, got {cov.shape}")
+    if not (np.all(np.isfinite(w)) and np.all(np.isfinite(p)) and np.all(np.isfinite(cov))):
+        raise RoutefuseError(None, "route match: window, position or covariance is not finite")
+    return w, p, 0.5 * (cov + cov.T)
+
+
+def match_window(
+    window_xy: ArrayLike,
+    p_dr: ArrayLike,
+    pos_cov2: ArrayLike,
+    route: Route,
+    *,
+    s_guess: float | None,
+    lane_offset: float,
+    params: Params,
+    index: int,
+    t: float,
+    epoch: int,
+) -> MatchRecord:
+    """Match the DR window ending at ``p_dr`` to the route; every gate is recorded.
+
+    ``window_xy``: (N, 2) DR positions in time order covering the last ``window.length_m`` of
+    travel, free of correction jumps. ``pos_cov2``: the filter's E/N covariance before the
+    update. ``s_guess``: the vehicle's previous route arc length (None: search the whole route).
+    ``lane_offset``: learned lateral offset, positive = vehicle left of the route. The record's
+    ``innovation`` is z - p_dr and ``correction`` is zero: the caller fills in what it applied.
+    """
+    win_raw, p, cov = _check_inputs(window_xy, p_dr, pos_cov2)
+    enabled = params.offset.enabled and np.isfinite(lane_offset)
+    lane = float(lane_offset) if enabled else 0.0
+    h = params.window.spacing_m
+    win = resample_polyline(win_raw, h, anchor="end")
+    span = (len(win) - 1) * h
+    if s_guess is None or not np.isfinite(s_guess):
+        s_anchor = float(route.project(win[0]).s[0])
+    else:
+        s_anchor = float(route.project(win[0], s_guess - span, params.window.route_search_m).s[0])
+    ext = params.extensions
+    lane_path = ext.lane_path_matching and abs(lane) > 1e-3
+    pad = params.window.along_search_m + 2.0 * h
+    cand = _piece(route, lane, s_anchor - pad, s_anchor + span + pad) if lane_path else route
+    fit = None
+    if cand is not None and len(win) >= 2:
+        if lane_path:
+            fit = _fit(win, p, cand, float(cand.project(win[0]).s[0]), 0.0, params)
+        else:
+            fit = _fit(win, p, cand, s_anchor, lane, params)
+    nan2 = np.full(2, np.nan)
+    if fit is None:
+        gates = (
+            _gate(
+                "min_pairs",
+                0 if len(win) < 2 else 1,
+                params.gates.min_pairs,
+                ">=",
+                "window or route too short to pair",
+            ),
+        )
+        return MatchRecord(
+            index=index,
+            t=t,
+            epoch=epoch,
+            accepted=False,
+            gates=gates,
+            window_dr=win,
+            route_points=np.empty((0, 2)),
+            route_segment=np.empty((0, 2)),
+            route_s=(s_anchor, s_anchor),
+            n_pairs=0,
+            rotation_rad=float("nan"),
+            translation=nan2,
+            residual_m=float("nan"),
+            heading_cos=float("nan"),
+            p_dr=p,
+            p_ref=nan2.copy(),
+            lane_offset_m=lane,
+            pseudo_position=nan2.copy(),
+            obs_cov=np.full((2, 2), np.nan),
+            innovation=nan2.copy(),
+            correction=np.zeros(2),
+            extra={"anchor_s": s_anchor, "window_length_m": span},
+        )
+
+    gates = _shape_gates(fit, params)
+    nu = fit.z - p
+    p_ref = fit.z - lane * fit.normal
+    if lane_path:
+        ends = fit.route_points[np.flatnonzero(fit.valid)[[0, -1]]] - lane * fit.normal
+        route_s = route.project(
+            ends, s_anchor + fit.along_offset + np.array([0.0, span]), pad + 10.0
+        ).s
+        s0, s1 = float(route_s[0]), float(route_s[1])
+    else:
+        s0, s1 = fit.s_first, fit.s_first + (fit.n_pairs - 1) * h
+    s_cov = cov + fit.obs_cov
+    extra: dict[str, float] = {
+        "anchor_s": s_anchor,
+        "window_length_m": span,
+        "along_offset_m": fit.along_offset,
+        "along_curvature": fit.along_curvature,
+        "along_sigma_m": fit.along_sigma,
+        "along_observed": float(fit.along_observed),
+        "cross_sigma_m": float(np.sqrt(fit.normal @ fit.obs_cov @ fit.normal)),
+        "lane_path": float(lane_path),
+        "innovation_along_m": float(nu @ fit.tangent),
+        "innovation_cross_m": float(nu @ fit.normal),
+    }
+    if ext.candidate_validation:
+        g = params.gates
+        d2 = _mahalanobis2(nu, s_cov)
+        extra["mahalanobis_d2"] = d2
+        gates.append(
+            _gate(
+                "mahalanobis", d2, g.mahalanobis_chi2, "<=", "innovation chi-square, S = P_EN + R_k"
+            )
+        )
+        jump = abs(float(nu @ fit.normal))
+        gates.append(
+            _gate(
+                "lane_continuity",
+                jump,
+                g.max_lateral_jump_m,
+                "<=",
+                "move across the route away from the learned lane, m",
+            )
+        )
+        cost = _rival_cost(fit, p, cov, params)
+        extra["cost"] = cost
+        for name, rival in _rivals(win, p, route, s_anchor, lane, lane_path, params).items():
+            if rival is None:
+                continue
+            plausible = all(d.passed for d in _shape_gates(rival, params))
+            rival_cost = _rival_cost(rival, p, cov, params)
+            extra[f"cost_{name}"] = rival_cost
+            extra[f"residual_{name}_m"] = rival.residual
+            margin = rival_cost - cost if plausible else float("inf")
+            note = (
+                f"rival cost minus candidate cost ({name} "
+                + (f"shift {g.alternative_shift_m:g} m)" if name != "reversed" else "direction)")
+                + ("" if plausible else "; rival fails the shape gates")
+            )
+            gates.append(
+                _gate(f"alternative_{name}", min(margin, 1e9), g.alternative_margin, ">=", note)
+            )
+    correction = float(np.hypot(*nu))
+    gates.append(
+        _gate("correction_cap", correction, params.gates.max_correction_m, "<=", "|z - p_dr|, m")
+    )
+    accepted = all(d.passed for d in gates)
+    return MatchRecord(
+        index=index,
+        t=t,
+        epoch=epoch,
+        accepted=accepted,
+        gates=tuple(gates),
+        window_dr=win[fit.valid],
+        route_points=fit.route_points[fit.valid],
+        route_segment=route.segment(s0, s1),
+        route_s=(s0, s1),
+        n_pairs=fit.n_pairs,
+        rotation_rad=fit.angle,
+        translation=fit.translation,
+        residual_m=fit.residual,
+        heading_cos=fit.heading_cos,
+        p_dr=p,
+        p_ref=p_ref,
+        lane_offset_m=lane,
+        pseudo_position=fit.z,
+        obs_cov=fit.obs_cov,
+        innovation=nu,
+        correction=np.zeros(2),
+        extra=extra,
+    )
