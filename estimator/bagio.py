@@ -62,6 +62,10 @@ class TopicChoice:
         )
 
 
+AUTO_TOPICS = TopicChoice()
+"""Every topic found by its type."""
+
+
 def is_truth_topic(topic: str) -> bool:
     name = topic.lower()
     return "truth" in name or "groundtruth" in name
