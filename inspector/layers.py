@@ -1,0 +1,389 @@
+"""Scene layers: small objects that draw one aspect of a session into a viser scene.
+
+``set_data(data)`` sends what does not change with time (route, trajectories, verdict markers);
+``draw(data, t)`` updates what does (vehicle poses, the current match attempt), touching only
+the handles whose content changed. A layer only knows a :class:`viser.SceneApi` and a
+:class:`SceneData`, so the live UI (a tab's ``client.scene``) and the headless export (the
+server's scene under a serializer) draw the same thing.
+
+Everything is drawn in the local EN plane (z = small per-layer offsets so lines do not fight),
+polylines as line segments with screen-space thickness.
+"""
+
+from __future__ import annotations
+
+from typing import ClassVar
+
+import numpy as np
+import viser
+
+from estimator.results import MatchRecord
+
+from .scene_data import F64, SceneData, Track, polyline_segments
+
+RGB = tuple[int, int, int]
+
+ROUTE = (120, 120, 120)
+SEGMENT = (255, 200, 0)
+BASELINE = (232, 113, 10)
+PROPOSED = (26, 115, 232)
+TRUTH = (30, 150, 60)
+GNSS = (40, 180, 90)
+NO_GNSS = (255, 170, 170)
+DR_WINDOW = (150, 70, 200)
+ALIGNED = (0, 190, 200)
+PAIRS = (170, 170, 170)
+PSEUDO = (220, 30, 140)
+ACCEPTED = (30, 170, 60)
+REJECTED = (220, 40, 40)
+
+MATCH_MAX_AGE_S = 5.0
+"""The current attempt stays drawn this long after its time (then the frame has no match)."""
+
+_EMPTY_SEG = np.zeros((1, 2, 3), np.float32)
+
+
+def _yaw_wxyz(yaw: float) -> tuple[float, float, float, float]:
+    return (float(np.cos(yaw / 2)), 0.0, 0.0, float(np.sin(yaw / 2)))
+
+
+def _segments_or_empty(seg: np.ndarray) -> np.ndarray:
+    return seg if len(seg) else _EMPTY_SEG
+
+
+def _points3(xy: F64, z: float) -> np.ndarray:
+    xy = np.asarray(xy, np.float64).reshape(-1, 2)
+    if len(xy) == 0:
+        return np.zeros((1, 3), np.float32)
+    return np.column_stack([xy, np.full(len(xy), z)]).astype(np.float32)
+
+
+class Layer:
+    """Base: a named group of scene handles that can be shown or hidden together."""
+
+    key: ClassVar[str] = ""
+    label: ClassVar[str] = ""
+
+    def __init__(self, scene: viser.SceneApi, *, root: str = "/routefuse") -> None:
+        self.scene = scene
+        self.root = f"{root}/{self.key}"
+        self._handles: dict[str, viser.SceneNodeHandle] = {}
+        self._visible = True
+
+    @property
+    def visible(self) -> bool:
+        return self._visible
+
+    @visible.setter
+    def visible(self, on: bool) -> None:
+        self._visible = bool(on)
+        for h in self._handles.values():
+            h.visible = self._visible and getattr(h, "_routefuse_wanted", True)
+
+    def _show(self, name: str, on: bool) -> None:
+        h = self._handles[name]
+        h._routefuse_wanted = on  # type: ignore[attr-defined]
+        h.visible = on and self._visible
+
+    def _lines(self, name: str, seg: np.ndarray, color: RGB, px: float) -> None:
+        seg = _segments_or_empty(np.asarray(seg, np.float32))
+        h = self._handles.get(name)
+        if h is None:
+            self._handles[name] = self.scene.add_line_segments(
+                f"{self.root}/{name}",
+                seg,
+                color,
+                thickness=px,
+                thickness_units="screen",
+                visible=self._visible,
+            )
+        else:
+            h.points = seg  # type: ignore[attr-defined]
+
+    def _cloud(
+        self,
+        name: str,
+        pts: np.ndarray,
+        colors: RGB | np.ndarray,
+        size: float,
+        shape: str = "circle",
+    ) -> None:
+        h = self._handles.get(name)
+        colors_arr = np.asarray(colors, np.uint8)
+        if colors_arr.ndim == 2 and len(colors_arr) != len(pts):
+            colors_arr = np.broadcast_to(colors_arr[:1], (len(pts), 3)).copy()
+        if h is None or (colors_arr.ndim == 2 and h.colors.shape != colors_arr.shape):  # type: ignore[attr-defined]
+            if h is not None:
+                h.remove()
+            self._handles[name] = self.scene.add_point_cloud(
+                f"{self.root}/{name}",
+                pts,
+                colors_arr,
+                point_size=size,
+                point_shape=shape,  # type: ignore[arg-type]
+                precision="float32",
+                point_shading="flat",
+                visible=self._visible,
+            )
+        else:
+            h.points = pts  # type: ignore[attr-defined]
+            if colors_arr.ndim == 2:
+                h.colors = colors_arr  # type: ignore[attr-defined]
+
+    def set_data(self, data: SceneData) -> None:
+        """Draw what does not depend on time."""
+
+    def draw(self, data: SceneData, t: float) -> None:
+        """Update what depends on the time ``t`` (absolute, the run's clock)."""
+
+    def remove(self) -> None:
+        for h in self._handles.values():
+            h.remove()
+        self._handles.clear()
+
+
+class RouteLayer(Layer):
+    key = "route"
+    label = "route"
+
+    def set_data(self, data: SceneData) -> None:
+        self._lines("line", polyline_segments(data.route_line, 0.0), ROUTE, 3.0)
+
+
+class GnssLayer(Layer):
+    key = "gnss"
+    label = "GNSS fixes and outages"
+
+    def set_data(self, data: SceneData) -> None:
+        self._lines("missing", data.degraded_segments, NO_GNSS, 14.0)
+        self._cloud("fixes", _points3(data.gnss_fixes, 0.05), GNSS, 1.2)
+        self._show("fixes", len(data.gnss_fixes) > 0)
+        self._show("missing", len(data.degraded_segments) > 0)
+
+
+class TrackLayer(Layer):
+    """One trajectory (baseline, proposed or truth) and its vehicle pose at ``t``."""
+
+    z: ClassVar[float] = 0.1
+    color: ClassVar[RGB] = PROPOSED
+    length_m: ClassVar[float] = 6.0
+
+    def _track(self, data: SceneData) -> Track | None:
+        raise NotImplementedError
+
+    def set_data(self, data: SceneData) -> None:
+        track = self._track(data)
+        line = track.line if track is not None else np.zeros((0, 2))
+        self._lines("line", polyline_segments(line, self.z), self.color, 2.0)
+        if "pose" not in self._handles:
+            L = self.length_m
+            verts = np.array(
+                [[L * 0.6, 0, 0], [-L * 0.4, L * 0.3, 0], [-L * 0.4, -L * 0.3, 0]], np.float32
+            )
+            self._handles["pose"] = self.scene.add_mesh_simple(
+                f"{self.root}/pose",
+                verts,
+                np.array([[0, 1, 2]], np.uint32),
+                color=self.color,
+                side="double",
+                flat_shading=True,
+                cast_shadow=False,
+                receive_shadow=False,
+                visible=self._visible,
+            )
+        self._show("line", track is not None)
+        self._show("pose", track is not None)
+
+    def draw(self, data: SceneData, t: float) -> None:
+        track = self._track(data)
+        if track is None:
+            return
+        xy, yaw = track.pose_at(t)
+        h = self._handles["pose"]
+        h.position = (float(xy[0]), float(xy[1]), self.z + 0.3)
+        h.wxyz = _yaw_wxyz(yaw)
+
+
+class BaselineLayer(TrackLayer):
+    key = "baseline"
+    label = "baseline trajectory"
+    color = BASELINE
+    z = 0.1
+
+    def _track(self, data: SceneData) -> Track | None:
+        return data.baseline
+
+
+class ProposedLayer(TrackLayer):
+    key = "proposed"
+    label = "proposed trajectory"
+    color = PROPOSED
+    z = 0.2
+
+    def _track(self, data: SceneData) -> Track | None:
+        return data.proposed
+
+
+class TruthLayer(TrackLayer):
+    key = "truth"
+    label = "ground truth"
+    color = TRUTH
+    z = 0.15
+    length_m = 5.0
+
+    def _track(self, data: SceneData) -> Track | None:
+        return data.truth
+
+
+class VerdictLayer(Layer):
+    """Every match attempt marked at its DR position, green accepted, red rejected."""
+
+    key = "verdicts"
+    label = "match verdicts"
+
+    def set_data(self, data: SceneData) -> None:
+        ok = np.all(np.isfinite(data.match_xy), axis=1) if len(data.match_xy) else np.zeros(0, bool)
+        pts = _points3(data.match_xy[ok], 0.4)
+        colors = np.where(data.match_accepted[ok, None], ACCEPTED, REJECTED).astype(np.uint8)
+        if len(colors) == 0:
+            colors = np.array([ACCEPTED], np.uint8)
+        self._cloud("markers", pts, colors, 2.5)
+        self._show("markers", bool(ok.any()))
+
+
+class MatchLayer(Layer):
+    """The current attempt: local route segment, DR window, aligned window R s + t, point
+    pairs, p_dr -> pseudo-position, and a label with its verdict."""
+
+    key = "match"
+    label = "current match attempt"
+    _parts = (
+        "segment",
+        "window",
+        "aligned",
+        "pairs",
+        "route_points",
+        "correction",
+        "pseudo",
+        "label",
+    )
+
+    def __init__(self, scene: viser.SceneApi, *, root: str = "/routefuse") -> None:
+        super().__init__(scene, root=root)
+        self._shown: int | None = -1
+        self._data_id: int | None = None
+
+    def set_data(self, data: SceneData) -> None:
+        self._shown = -1
+        self._data_id = id(data)
+
+    def draw(self, data: SceneData, t: float) -> None:
+        i = data.match_index_at(t, max_age_s=MATCH_MAX_AGE_S)
+        if i == self._shown and self._data_id == id(data):
+            return
+        self._shown, self._data_id = i, id(data)
+        if i is None:
+            for name in self._handles:
+                self._show(name, False)
+            return
+        self.draw_match(data.matches[i])
+
+    def draw_match(self, m: MatchRecord) -> None:
+        win = np.asarray(m.window_dr, np.float64).reshape(-1, 2)
+        route_pts = np.asarray(m.route_points, np.float64).reshape(-1, 2)
+        seg = np.asarray(m.route_segment, np.float64).reshape(-1, 2)
+        self._lines("segment", polyline_segments(seg, 0.02), SEGMENT, 7.0)
+        self._lines("window", polyline_segments(win, 0.3), DR_WINDOW, 3.0)
+        aligned = np.zeros((0, 2))
+        c, s = np.cos(m.rotation_rad), np.sin(m.rotation_rad)
+        tr = np.asarray(m.translation, np.float64).reshape(-1)
+        if (
+            len(win)
+            and np.isfinite(m.rotation_rad)
+            and tr.shape == (2,)
+            and np.all(np.isfinite(tr))
+        ):
+            aligned = win @ np.array([[c, s], [-s, c]]) + tr
+        self._lines("aligned", polyline_segments(aligned, 0.35), ALIGNED, 3.0)
+        n = min(len(win), len(route_pts))
+        pair_seg = np.zeros((0, 2, 3), np.float32)
+        if n:
+            a = _points3(win[:n], 0.25)
+            b = _points3(route_pts[:n], 0.25)
+            ok = np.all(np.isfinite(a), axis=1) & np.all(np.isfinite(b), axis=1)
+            pair_seg = np.stack([a[ok], b[ok]], axis=1)
+        self._lines("pairs", pair_seg, PAIRS, 1.0)
+        self._cloud("route_points", _points3(route_pts, 0.3), SEGMENT, 0.8)
+        p_dr = np.asarray(m.p_dr, np.float64).reshape(-1)
+        z = np.asarray(m.pseudo_position, np.float64).reshape(-1)
+        has_z = z.shape == (2,) and np.all(np.isfinite(z)) and np.all(np.isfinite(p_dr))
+        corr = (
+            np.array([[[p_dr[0], p_dr[1], 0.5], [z[0], z[1], 0.5]]], np.float32)
+            if has_z
+            else np.zeros((0, 2, 3), np.float32)
+        )
+        self._lines("correction", corr, PSEUDO, 3.0)
+        self._cloud("pseudo", _points3(z if has_z else np.zeros((0, 2)), 0.5), PSEUDO, 2.0)
+        anchor = p_dr if np.all(np.isfinite(p_dr)) else (win[-1] if len(win) else np.zeros(2))
+        text = f"#{m.index} {m.verdict}"
+        h = self._handles.get("label")
+        if h is None:
+            self._handles["label"] = self.scene.add_label(
+                f"{self.root}/label",
+                text,
+                position=(*map(float, anchor), 1.0),
+                anchor="bottom-left",
+                visible=self._visible,
+            )
+        else:
+            h.text = text  # type: ignore[attr-defined]
+            h.position = (*map(float, anchor), 1.0)
+        shown = {
+            "segment": len(seg) > 1,
+            "window": len(win) > 1,
+            "aligned": len(aligned) > 1,
+            "pairs": len(pair_seg) > 0,
+            "route_points": len(route_pts) > 0,
+            "correction": bool(has_z),
+            "pseudo": bool(has_z),
+            "label": True,
+        }
+        for name, on in shown.items():
+            self._show(name, on)
+
+
+LAYER_TYPES: tuple[type[Layer], ...] = (
+    RouteLayer,
+    GnssLayer,
+    TruthLayer,
+    BaselineLayer,
+    ProposedLayer,
+    VerdictLayer,
+    MatchLayer,
+)
+
+
+class SceneLayers:
+    """All layers of one scene, drawn together."""
+
+    def __init__(self, scene: viser.SceneApi, *, root: str = "/routefuse") -> None:
+        self.layers: dict[str, Layer] = {cls.key: cls(scene, root=root) for cls in LAYER_TYPES}
+        self.data: SceneData | None = None
+
+    def set_data(self, data: SceneData) -> None:
+        self.data = data
+        for layer in self.layers.values():
+            layer.set_data(data)
+
+    def draw(self, t: float) -> None:
+        if self.data is None:
+            return
+        for layer in self.layers.values():
+            layer.draw(self.data, t)
+
+    def set_visible(self, key: str, on: bool) -> None:
+        self.layers[key].visible = on
+
+    def remove(self) -> None:
+        for layer in self.layers.values():
+            layer.remove()

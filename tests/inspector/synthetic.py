@@ -1,0 +1,115 @@
+"""Small hand-built runs for testing the inspector's logic without the estimator (its own tests
+use the real runner on a sample log)."""
+
+from __future__ import annotations
+
+from dataclasses import dataclass
+
+import numpy as np
+
+from estimator.geo import LocalFrame
+from estimator.params import Params
+from estimator.results import Epochs, GateDecision, MatchRecord, Run
+from estimator.route import Route
+
+T0 = 1_700_000_000.0
+
+
+@dataclass(frozen=True)
+class FakeInputs:
+    log: object
+    route: Route
+    frame: LocalFrame
+
+
+def make_route() -> Route:
+    s = np.linspace(0, 1000, 101)
+    return Route(np.column_stack([s, 20 * np.sin(s / 200)]), name="synthetic")
+
+
+def make_run(
+    *,
+    drift: float = 0.0,
+    rejected: tuple[int, ...] = (2,),
+    method="proposed",
+    params: Params | None = None,
+    n_matches: int = 5,
+) -> Run:
+    route = make_route()
+    t = T0 + np.arange(0, 100, 0.05)
+    s = 10.0 * (t - T0)
+    xy = route.point_at(s) + drift * ((t - T0) / 100)[:, None] * np.array([0.0, 1.0])
+    yaw = route.heading_at(s)
+    n = len(t)
+    epochs = Epochs(
+        t=t,
+        position=np.column_stack([xy, np.zeros(n)]),
+        velocity=np.zeros((n, 3)),
+        attitude=np.column_stack([np.zeros(n), np.zeros(n), yaw]),
+        position_sigma=np.ones((n, 3)),
+        yaw_sigma=np.full(n, 0.01),
+        gnss_used=(t - T0 < 30) | (t - T0 > 80),
+        degraded=(t - T0 >= 30) & (t - T0 <= 80),
+    )
+    matches = []
+    for k in range(n_matches if method != "baseline" else 0):
+        tm = T0 + 40 + 5 * k
+        e = int(np.searchsorted(t, tm))
+        sm = 10.0 * (tm - T0)
+        win_s = np.arange(sm - 100, sm + 1e-9, 5.0)
+        win = route.point_at(win_s) + np.array([0.0, 3.0])
+        ok = k not in rejected
+        gates = (
+            GateDecision("min_pairs", 21.0, 20.0, ">=", True),
+            GateDecision("heading_cos", 0.999, float(np.cos(np.radians(10))), ">=", True),
+            GateDecision("residual_m", 1.0 if ok else 7.5, 3.0, "<=", ok),
+        )
+        matches.append(
+            MatchRecord(
+                index=k,
+                t=tm,
+                epoch=e,
+                accepted=ok,
+                gates=gates,
+                window_dr=win,
+                route_points=route.point_at(win_s),
+                route_segment=route.segment(sm - 110, sm + 10),
+                route_s=(sm - 110, sm + 10),
+                n_pairs=len(win_s),
+                rotation_rad=0.001,
+                translation=np.array([0.0, -3.0]),
+                residual_m=1.0 if ok else 7.5,
+                heading_cos=0.999,
+                p_dr=win[-1],
+                p_ref=win[-1] - [0, 3],
+                lane_offset_m=0.0,
+                pseudo_position=win[-1] - [0, 3],
+                obs_cov=np.eye(2) * 4,
+                innovation=np.array([0.0, -3.0]),
+                correction=np.array([0.0, -2.0]) if ok else np.zeros(2),
+            )
+        )
+    return Run(
+        method=method,
+        params=params or Params(),
+        frame=LocalFrame(45.0, 7.0),
+        epochs=epochs,
+        matches=tuple(matches),
+        degraded_intervals=((T0 + 30, T0 + 80),),
+        t0=T0,
+    )
+
+
+def fake_open(log_path, route_path, progress):
+    progress(0.5, "reading")
+    if "bad" in str(log_path):
+        from estimator.errors import LogError
+
+        raise LogError(log_path, "not a bag")
+    return FakeInputs(log=None, route=make_route(), frame=LocalFrame(45.0, 7.0))
+
+
+def fake_run(inputs, params, method, progress, reuse):
+    progress(0.5, "running")
+    drift = 30.0 if method == "baseline" else params.gates.max_residual_m
+    return make_run(drift=drift, method=method, params=params)
