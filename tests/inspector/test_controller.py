@@ -1,0 +1,213 @@
+"""The inspector's session logic without a browser: file picking, uploads, time navigation and
+the latest-request-wins worker."""
+
+from __future__ import annotations
+
+import os
+import stat
+import threading
+import time
+from pathlib import Path
+
+import numpy as np
+import pytest
+from fake_runs import T0, fake_open, fake_run, make_run
+
+from estimator.errors import ConfigError, RoutefuseError
+from estimator.params import Params, with_values
+from inspector.controller import Controller, DataFolders, Playhead, Timeline, UploadFolder
+
+
+def _data(tmp_path: Path) -> Path:
+    d = tmp_path / "data"
+    (d / "sub").mkdir(parents=True)
+    (d / "drive.mcap").write_bytes(b"x")
+    (d / "drive.route.geojson").write_text("{}")
+    (d / "sub" / "old.bag").write_bytes(b"x")
+    (d / "sub" / "old.gpx").write_text("<gpx/>")
+    (d / "notes.txt").write_text("not offered")
+    bag2 = d / "ros2_bag"
+    bag2.mkdir()
+    (bag2 / "metadata.yaml").write_text("rosbag2_bagfile_information: {}")
+    (bag2 / "ros2_bag_0.db3").write_bytes(b"x")
+    return d
+
+
+def test_listing_offers_logs_and_routes_under_the_folders(tmp_path):
+    folders = DataFolders.of(_data(tmp_path))
+    listing = folders.listing()
+    assert set(listing.logs) == {"data/drive.mcap", "data/sub/old.bag", "data/ros2_bag"}
+    assert set(listing.routes) == {"data/drive.route.geojson", "data/sub/old.gpx"}
+    assert folders.default_route("data/drive.mcap") == "data/drive.route.geojson"
+    assert folders.resolve("data/sub/old.bag", "log") == (tmp_path / "data/sub/old.bag").resolve()
+
+
+def test_names_outside_the_folders_cannot_be_opened(tmp_path):
+    d = _data(tmp_path)
+    secret = tmp_path / "secret.mcap"
+    secret.write_bytes(b"x")
+    (tmp_path / "outside").mkdir()
+    (tmp_path / "outside" / "x.geojson").write_text("{}")
+    os.symlink(secret, d / "link.mcap")
+    os.symlink(tmp_path / "outside", d / "linked_dir")
+    folders = DataFolders.of(d)
+    listing = folders.listing()
+    assert "data/link.mcap" not in listing.logs
+    assert not any("linked_dir" in n for n in listing.routes)
+    for name in ("data/../secret.mcap", "../secret.mcap", str(secret), "data/link.mcap"):
+        with pytest.raises(RoutefuseError, match="no such log"):
+            folders.resolve(name, "log")
+
+
+def test_upload_folder_is_private_size_limited_and_sanitised(tmp_path):
+    up = UploadFolder(max_bytes=1000)
+    try:
+        assert stat.S_IMODE(up.path.stat().st_mode) == 0o700
+        path = up.save("../../etc/evil name.mcap", b"abc")
+        assert path.parent == up.path and path.name.endswith("evil_name.mcap")
+        with pytest.raises(RoutefuseError, match="exceeds the limit"):
+            up.save("big.mcap", b"x" * 1001)
+        with pytest.raises(RoutefuseError, match="not a log"):
+            up.save("script.sh", b"rm -rf /")
+        with pytest.raises(RoutefuseError, match="empty"):
+            up.save("empty.bag", b"")
+    finally:
+        up.close()
+    assert not up.path.exists()
+
+
+def test_timeline_navigation():
+    tl = Timeline.of_run(make_run(rejected=(2, 4)))
+    assert tl.n_frames == 2000 and tl.duration == pytest.approx(99.95)
+    assert tl.step(0.0, 1) == pytest.approx(0.05)
+    assert tl.step(0.0, -1) == 0.0
+    assert tl.step(99.0, 1000) == pytest.approx(99.95)
+    # attempts at 40, 45, 50, 55, 60 s; 50 and 60 rejected
+    assert tl.next_match(0.0) == 0
+    assert tl.next_match(40.0) == 1
+    assert tl.previous_match(45.0) == 0
+    assert tl.previous_match(40.0) is None
+    assert tl.next_match(0.0, rejected_only=True) == 2
+    assert tl.next_match(50.0, rejected_only=True) == 4
+    assert tl.next_match(60.0, rejected_only=True) is None
+    assert tl.match_at(47.0) == 1 and tl.match_at(39.0) is None
+
+
+def test_playhead_plays_at_speed_and_stops_at_the_end():
+    tl = Timeline.of_run(make_run())
+    ph = Playhead(t=10.0, playing=True, speed=5.0)
+    ph.advance(tl, 0.5)
+    assert ph.t == pytest.approx(12.5)
+    ph.advance(tl, 100.0)
+    assert not ph.playing and ph.t == pytest.approx(tl.duration)
+
+
+def _controller(tmp_path: Path, **kw) -> Controller:
+    return Controller(DataFolders.of(_data(tmp_path)), opener=fake_open, runner=fake_run, **kw)
+
+
+def test_open_builds_a_session_and_a_bad_file_keeps_it(tmp_path):
+    errors: list[RoutefuseError] = []
+    progress: list[float] = []
+    c = _controller(tmp_path)
+    try:
+        c.subscribe(on_error=errors.append, on_progress=lambda f, m: progress.append(f))
+        c.open_named("data/drive.mcap", "data/drive.route.geojson")
+        assert c.wait_idle(10)
+        s = c.session
+        assert s is not None and s.log_name == "data/drive.mcap"
+        assert s.proposed.method == "proposed" and s.baseline.method == "baseline"
+        assert len(s.scene.matches) == 5 and s.metrics[0][0].startswith("max position")
+        assert progress[-1] == 1.0 and all(0 <= f <= 1 for f in progress)
+        bad = tmp_path / "data" / "bad.mcap"
+        bad.write_bytes(b"x")
+        c.open_named("data/bad.mcap", "data/drive.route.geojson")
+        assert c.wait_idle(10)
+        assert c.session is s
+        assert len(errors) == 1 and "not a bag" in str(errors[0])
+        with pytest.raises(RoutefuseError):
+            c.open_named("data/../../etc/passwd", "data/drive.route.geojson")
+    finally:
+        c.close()
+
+
+def test_bad_parameter_value_is_refused_before_the_worker(tmp_path):
+    c = _controller(tmp_path)
+    try:
+        with pytest.raises(ConfigError, match="outside"):
+            c.set_param("gates.max_residual_m", -1.0)
+        with pytest.raises(ConfigError, match="unknown parameter"):
+            c.set_param("gates.nope", 1.0)
+    finally:
+        c.close()
+
+
+def test_latest_parameter_request_wins(tmp_path):
+    calls: list[float] = []
+    release = threading.Event()
+
+    def slow_run(inputs, params, method, progress, reuse):
+        calls.append(params.gates.max_residual_m)
+        for _ in range(50):
+            progress(0.5)  # a superseded run stops here
+            if release.is_set():
+                break
+            time.sleep(0.01)
+        return fake_run(inputs, params, method, progress, reuse)
+
+    c = Controller(DataFolders.of(_data(tmp_path)), opener=fake_open, runner=slow_run)
+    try:
+        release.set()
+        c.open_named("data/drive.mcap", "data/drive.route.geojson")
+        assert c.wait_idle(10)
+        first = c.session
+        published: list[float] = []
+        c.subscribe(on_session=lambda s: published.append(s.params.gates.max_residual_m))
+        release.clear()
+        calls.clear()
+        for v in np.arange(3.5, 8.0, 0.5):
+            c.set_param("gates.max_residual_m", float(v))
+            time.sleep(0.02)
+        release.set()
+        assert c.wait_idle(10)
+        s = c.session
+        assert s is not None and s is not first
+        assert s.params.gates.max_residual_m == 7.5
+        # nine requests while runs were slow: superseded runs were abandoned, only the last
+        # request (perhaps with one that had finished before the next arrived) was published
+        assert len(calls) >= 2
+        assert len(published) <= 2 and published[-1] == 7.5
+        assert c.params == s.params and not c.busy
+    finally:
+        c.close()
+
+
+def test_same_parameters_do_not_rerun(tmp_path):
+    runs: list[str] = []
+
+    def counting_run(inputs, params, method, progress, reuse):
+        runs.append(method)
+        return fake_run(inputs, params, method, progress, reuse)
+
+    c = Controller(DataFolders.of(_data(tmp_path)), opener=fake_open, runner=counting_run)
+    try:
+        c.open_named("data/drive.mcap", "data/drive.route.geojson")
+        assert c.wait_idle(10)
+        n = len(runs)
+        c.set_params(c.params)
+        c.set_param("gates.max_residual_m", c.params.gates.max_residual_m)
+        assert c.wait_idle(10) and len(runs) == n
+        c.set_param("gates.max_residual_m", 4.0)
+        assert c.wait_idle(10)
+        assert c.session.params == with_values(Params(), {"gates.max_residual_m": 4.0})
+        c.reset_params()
+        assert c.wait_idle(10) and c.session.params == Params()
+    finally:
+        c.close()
+
+
+def test_time_is_relative_to_the_log_start():
+    tl = Timeline.of_run(make_run())
+    assert tl.t[0] == 0.0
+    assert tl.match_t[0] == pytest.approx(40.0)
+    assert make_run().t0 == T0

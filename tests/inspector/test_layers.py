@@ -1,0 +1,72 @@
+"""Scene layers drawn into a real (browser-less) viser server: what a frame step changes."""
+
+from __future__ import annotations
+
+import socket
+
+import numpy as np
+import pytest
+import viser
+from fake_runs import T0, make_route, make_run
+
+from inspector.layers import SceneLayers
+from inspector.scene_data import SceneData
+
+
+def _free_port() -> int:
+    with socket.socket() as s:
+        s.bind(("127.0.0.1", 0))
+        return s.getsockname()[1]
+
+
+@pytest.fixture(scope="module")
+def server():
+    srv = viser.ViserServer(host="127.0.0.1", port=_free_port(), verbose=False)
+    yield srv
+    srv.stop()
+
+
+def test_draw_moves_the_vehicle_and_switches_the_match(server):
+    data = SceneData.build(
+        baseline=make_run(drift=30, method="baseline"),
+        proposed=make_run(),
+        route=make_route(),
+        log=None,
+    )
+    layers = SceneLayers(server.scene, root="/test1")
+    layers.set_data(data)
+    pose = layers.layers["proposed"]._handles["pose"]
+    match = layers.layers["match"]
+    layers.draw(T0 + 10)
+    p10 = np.array(pose.position)
+    assert not match._handles  # no attempt yet: nothing drawn
+    layers.draw(T0 + 10.05)
+    assert np.linalg.norm(np.array(pose.position) - p10) > 0.1
+    layers.draw(T0 + 45)
+    label = match._handles["label"]
+    assert label.text == "#1 accepted" and label.visible
+    window = match._handles["window"].points.copy()
+    layers.draw(T0 + 50)
+    assert label.text == "#2 rejected: residual_m"
+    assert not np.allclose(match._handles["window"].points, window)
+    layers.draw(T0 + 70)  # 10 s after the last attempt: the match layer hides
+    assert not label.visible and not match._handles["window"].visible
+    layers.remove()
+
+
+def test_toggling_a_layer_hides_its_nodes(server):
+    data = SceneData.build(
+        baseline=make_run(method="baseline"), proposed=make_run(), route=make_route(), log=None
+    )
+    layers = SceneLayers(server.scene, root="/test2")
+    layers.set_data(data)
+    layers.draw(T0 + 45)
+    layers.set_visible("match", False)
+    assert all(not h.visible for h in layers.layers["match"]._handles.values())
+    layers.draw(T0 + 50)
+    assert all(not h.visible for h in layers.layers["match"]._handles.values())
+    layers.set_visible("match", True)
+    assert layers.layers["match"]._handles["label"].visible
+    layers.set_visible("baseline", False)
+    assert not layers.layers["baseline"]._handles["line"].visible
+    layers.remove()
