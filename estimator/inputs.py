@@ -7,6 +7,7 @@ from dataclasses import dataclass
 from pathlib import Path
 
 import numpy as np
+import pyproj
 from numpy.typing import NDArray
 
 from .bagio import AUTO_TOPICS, TopicChoice, load_log
@@ -14,7 +15,7 @@ from .errors import LogError, RouteError
 from .geo import LocalFrame
 from .log import Log
 from .route import Route
-from .routeio import load_route
+from .routeio import RouteLine, read_route_file, route_in_frame
 
 MAX_ROUTE_DISTANCE_M = 5000.0
 """A route whose every point is farther than this from every GNSS fix belongs to another log."""
@@ -64,6 +65,21 @@ def route_distances(
     return route.project(xy).distance
 
 
+def _geodesic_gap(log: Log, frame: LocalFrame, line: RouteLine) -> float:
+    """Smallest ellipsoidal distance between route vertices and log positions (a local
+    plane shrinks distances of thousands of km, so a far route is measured on the ellipsoid)."""
+    fixes = frame.to_geodetic(fix_positions(log, frame))
+    fixes = fixes[np.linspace(0, len(fixes) - 1, min(len(fixes), 200)).astype(np.intp)]
+    pick = np.linspace(0, len(line.lat) - 1, min(len(line.lat), 200)).astype(np.intp)
+    lat_r, lon_r = line.lat[pick], line.lon[pick]
+    lat_f = np.repeat(fixes[:, 0], len(pick))
+    lon_f = np.repeat(fixes[:, 1], len(pick))
+    _, _, d = pyproj.Geod(ellps="WGS84").inv(
+        lon_f, lat_f, np.tile(lon_r, len(fixes)), np.tile(lat_r, len(fixes))
+    )
+    return float(np.min(d))
+
+
 def open_inputs(
     log_path: str | Path,
     route_path: str | Path | None = None,
@@ -80,12 +96,14 @@ def open_inputs(
     frame = frame_of(log)
     route = None
     if route_path is not None:
-        route = load_route(route_path, frame, feature=route_feature)
+        line = read_route_file(route_path, feature=route_feature)
+        route = route_in_frame(line, frame)
         dist = route_distances(log, route, frame, max_points=500)
         if len(dist) and dist.min() > MAX_ROUTE_DISTANCE_M:
+            far = _geodesic_gap(log, frame, line)
             raise RouteError(
                 route_path,
-                f"route is {dist.min() / 1000:.1f} km from the nearest position of "
+                f"route is {far / 1000:.1f} km from the nearest position of "
                 f"{Path(log_path).name} (more than {MAX_ROUTE_DISTANCE_M / 1000:g} km): "
                 "wrong route for this log?",
             )

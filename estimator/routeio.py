@@ -59,6 +59,16 @@ def read_route_file(path: str | Path, *, feature: str | int | None = None) -> Ro
     placemarks), ``feature`` picks one by name or index; without it that is an error listing
     them."""
     p = Path(path)
+    return _to_line(p, _choose(p, _candidates(p), feature))
+
+
+def read_route_lines(path: str | Path) -> tuple[RouteLine, ...]:
+    """Every line of a route file (to list them, e.g. in ``routefuse info``)."""
+    p = Path(path)
+    return tuple(_to_line(p, c) for c in _candidates(p))
+
+
+def _candidates(p: Path) -> list[_Candidate]:
     fmt = SUFFIXES.get(p.suffix.lower())
     if fmt is None:
         raise RouteError(
@@ -67,13 +77,15 @@ def read_route_file(path: str | Path, *, feature: str | int | None = None) -> Ro
             "or .csv",
         )
     text = _read_text(p)
-    candidates = {
+    return {
         "geojson": _geojson_lines,
         "gpx": _gpx_lines,
         "kml": _kml_lines,
         "csv": _csv_lines,
     }[fmt](p, text)
-    chosen = _choose(p, candidates, feature)
+
+
+def _to_line(p: Path, chosen: _Candidate) -> RouteLine:
     pts = np.array(chosen.points, dtype=np.float64).reshape(-1, 3)
     if len(pts) < 2:
         raise RouteError(p, f"route has {len(pts)} point{'s' * (len(pts) != 1)}; need at least 2")
@@ -94,14 +106,18 @@ def read_route_file(path: str | Path, *, feature: str | int | None = None) -> Ro
 
 
 def load_route(path: str | Path, frame: LocalFrame, *, feature: str | int | None = None) -> Route:
-    """A route file as a :class:`Route` in ``frame``'s EN plane. Points without a height are
-    placed at the frame origin's height, so a missing height does not tilt them off the plane."""
-    line = read_route_file(path, feature=feature)
+    """A route file as a :class:`Route` in ``frame``'s EN plane."""
+    return route_in_frame(read_route_file(path, feature=feature), frame)
+
+
+def route_in_frame(line: RouteLine, frame: LocalFrame) -> Route:
+    """Points without a height are placed at the frame origin's height, so a missing height
+    does not tilt them off the plane."""
     h = np.where(np.isfinite(line.alt), line.alt, frame.h0)
     enu = frame.to_enu(line.lat, line.lon, h)
     if not np.all(np.isfinite(enu)):
-        raise RouteError(path, "route cannot be placed in the local frame (non-finite ENU)")
-    return Route(enu[:, :2], name=line.name, source=str(path))
+        raise RouteError(line.source, "route cannot be placed in the local frame (non-finite ENU)")
+    return Route(enu[:, :2], name=line.name, source=line.source)
 
 
 # ---------------------------------------------------------------------------------------------
