@@ -1,0 +1,122 @@
+from __future__ import annotations
+
+import dataclasses
+from pathlib import Path
+
+import pytest
+
+from estimator.errors import ConfigError
+from estimator.params import (
+    ExtensionParams,
+    Params,
+    coerce_value,
+    for_method,
+    get_param,
+    load_params,
+    param_specs,
+    params_to_toml,
+    parse_assignments,
+    save_params,
+    with_values,
+)
+
+
+def _changed(params: Params) -> dict[str, object]:
+    """A new in-bounds value for every numeric and boolean parameter."""
+    out: dict[str, object] = {}
+    for spec in param_specs():
+        value = get_param(params, spec.name)
+        if isinstance(value, bool):
+            out[spec.name] = not value
+        elif isinstance(value, float) and spec.lo is not None and spec.hi is not None:
+            out[spec.name] = (
+                (spec.lo + spec.hi) / 2 if value != (spec.lo + spec.hi) / 2 else spec.lo
+            )
+        elif isinstance(value, tuple):
+            out[spec.name] = tuple(v + 0.5 for v in value)
+    return out
+
+
+def test_defaults_respect_their_own_bounds() -> None:
+    specs = list(param_specs())
+    assert len(specs) == len({s.name for s in specs}) > 10
+    for spec in specs:
+        assert spec.doc, spec.name
+        if spec.default is not None:
+            assert coerce_value(spec, spec.default) == spec.default, spec.name
+
+
+def test_toml_round_trip_of_defaults_and_of_every_changed_value(tmp_path: Path) -> None:
+    path = tmp_path / "p.toml"
+    save_params(Params(), path)
+    assert load_params(path) == Params()
+    values = _changed(Params())
+    changed = with_values(Params(), values)
+    for name, value in values.items():
+        assert get_param(changed, name) == value
+    assert changed != Params()
+    path.write_text(params_to_toml(changed))
+    assert load_params(path) == changed
+
+
+def test_cli_strings_are_converted() -> None:
+    p = with_values(
+        Params(), parse_assignments(["sensors.imu_yaw_deg=-90", "sensors.gnss_lever_arm_m=1,0,1.5"])
+    )
+    assert p.sensors.imu_yaw_deg == -90.0
+    assert p.sensors.gnss_lever_arm_m == (1.0, 0.0, 1.5)
+    p = with_values(p, {"sensors.initial_heading_deg": "none"})
+    assert p.sensors.initial_heading_deg is None
+
+
+@pytest.mark.parametrize(
+    ("values", "problem"),
+    [
+        ({"sensors.imu_yaw_deg": 400}, "sensors.imu_yaw_deg=400.0 is outside [-180, 180]"),
+        ({"sensors.imu_yaw_deg": "east"}, "invalid value 'east'"),
+        ({"sensors.imu_yaw_deg": "nan"}, "NaN is not a valid value"),
+        ({"sensors.gnss_lever_arm_m": "1,2"}, "expected 3 numbers"),
+        ({"sensors.no_such": 1}, "unknown parameter 'sensors.no_such'"),
+    ],
+)
+def test_bad_values_are_config_errors(values: dict, problem: str) -> None:
+    with pytest.raises(ConfigError) as err:
+        with_values(Params(), values, "cmdline")
+    assert problem in str(err.value) and "\n" not in str(err.value)
+
+
+def test_bad_bool_is_refused() -> None:
+    name = next(s.name for s in param_specs() if s.type is bool)
+    with pytest.raises(ConfigError, match="invalid value 'maybe'"):
+        with_values(Params(), {name: "maybe"})
+
+
+@pytest.mark.parametrize(
+    ("text", "problem"),
+    [
+        ("[sensors]\nimu_yaw_deg = 1000.0\n", "is outside"),
+        ("[sensors]\nimu_yaw = 1.0\n", "unknown parameter 'sensors.imu_yaw'"),
+        ("[sensors\nimu_yaw_deg = 1\n", "not valid TOML"),
+    ],
+)
+def test_bad_toml_files(tmp_path: Path, text: str, problem: str) -> None:
+    path = tmp_path / "bad.toml"
+    path.write_text(text)
+    with pytest.raises(ConfigError) as err:
+        load_params(path)
+    assert str(err.value).startswith(str(path)) and problem in str(err.value)
+
+
+def test_missing_config_and_bad_assignment(tmp_path: Path) -> None:
+    with pytest.raises(ConfigError, match="cannot read config"):
+        load_params(tmp_path / "none.toml")
+    with pytest.raises(ConfigError, match="--set expects NAME=VALUE"):
+        parse_assignments(["sensors.imu_yaw_deg"])
+
+
+def test_paper_method_switches_every_extension_off() -> None:
+    paper = for_method(Params(), "paper")
+    assert all(v is False for v in dataclasses.asdict(paper.extensions).values())
+    assert for_method(Params(), "proposed") == Params()
+    assert paper.noise == Params().noise
+    assert dataclasses.fields(ExtensionParams)
