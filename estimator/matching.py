@@ -117,16 +117,16 @@ def shifted_route(
     """The part of ``route`` between two arc lengths, offset sideways (positive = to the left).
 
     Vertices move along their miter direction, so each segment stays parallel to the original
-    at exactly ``lateral_m`` (a parallel carriageway), with the miter length capped at hairpins.
+    at exactly ``lateral_m`` (a parallel carriageway). Where the offset exceeds the radius of a
+    bend, the offset segments fold back into a loop; their vertices are dropped, since a real
+    parallel road does not loop either.
     """
     end = route.length if s1 is None else s1
     pts = route.segment(s0, end)
-    seg = np.diff(pts, axis=0)
-    seglen = np.hypot(seg[:, 0], seg[:, 1])
-    keep = seglen > 1e-9
-    if not keep.any():
+    seglen = np.hypot(*np.diff(pts, axis=0).T)
+    if not np.any(seglen > 1e-9):
         raise RouteError(route.source or None, "route piece to shift has no length")
-    pts = np.vstack([pts[:1], pts[1:][keep]])
+    pts = np.vstack([pts[:1], pts[1:][seglen > 1e-9]])
     u = np.diff(pts, axis=0)
     u /= np.hypot(u[:, 0], u[:, 1])[:, None]
     nrm = np.column_stack([-u[:, 1], u[:, 0]])
@@ -135,7 +135,22 @@ def shifted_route(
     if len(nrm) > 1:
         cos = np.einsum("ij,ij->i", nrm[:-1], nrm[1:])
         miter[1:-1] = (nrm[:-1] + nrm[1:]) / np.maximum(1.0 + cos, 0.5)[:, None]
-    return Route(pts + lateral_m * miter, name=route.name, source=route.source)
+    out = pts + lateral_m * miter
+    keep = np.arange(len(pts))
+    while len(keep) > 2:
+        chord = np.diff(pts[keep], axis=0)
+        moved = np.diff(out[keep], axis=0)
+        folded = np.flatnonzero(np.einsum("ij,ij->i", chord, moved) <= 0.0)
+        if not len(folded):
+            break
+        drop = np.zeros(len(keep), bool)
+        drop[folded] = drop[folded + 1] = True
+        drop[[0, -1]] = False
+        if not drop.any():
+            break
+        keep = keep[~drop]
+    out = out[keep]
+    return Route(out, name=route.name, source=route.source)
 
 
 def route_arc_length(

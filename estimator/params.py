@@ -123,8 +123,9 @@ class PseudoObsParams:
         100.0, "along-track 1-sigma where route shape does not observe it (straight road)",
         unit="m", lo=1, hi=10000, step=1)
     shape_noise_m: float = param(
-        0.5, "per-point noise of DR and route shape assumed when deriving the along-track "
-        "sigma", unit="m", lo=0.01, hi=20, step=0.05)
+        1.0, "per-point noise of DR and route shape (map error, corner cutting) assumed when "
+        "deriving the along-track sigma and comparing rivals", unit="m", lo=0.01, hi=20,
+        step=0.05)
 
 
 @dataclass(frozen=True)
