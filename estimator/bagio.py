@@ -98,6 +98,27 @@ def _bag_paths(path: Path) -> Path:
     return path
 
 
+class _CallbackRaised(Exception):
+    """Carries an exception raised by the caller's progress callback (e.g. a cancellation)
+    through :func:`_reading` unchanged."""
+
+    def __init__(self, exc: Exception) -> None:
+        self.exc = exc
+
+
+def _guarded(progress: Callable[[float], None] | None) -> Callable[[float], None] | None:
+    if progress is None:
+        return None
+
+    def report(fraction: float) -> None:
+        try:
+            progress(fraction)
+        except Exception as exc:
+            raise _CallbackRaised(exc) from exc
+
+    return report
+
+
 @contextlib.contextmanager
 def _reading(path: Path) -> Any:
     """Turn rosbags' (and the storage libraries') exceptions into one-line LogErrors."""
@@ -105,6 +126,8 @@ def _reading(path: Path) -> Any:
         yield
     except LogError:
         raise
+    except _CallbackRaised as passed:
+        raise passed.exc from None
     except Exception as exc:
         reason = str(exc).strip().splitlines()[0] if str(exc).strip() else type(exc).__name__
         if reason.lower().startswith("file magic is invalid"):
@@ -610,7 +633,7 @@ def _read(
             types.setdefault(conn.topic, conn.msgtype)
             counts[conn.topic] = counts.get(conn.topic, 0) + int(conn.msgcount or 0)
         roles = _roles(path, types, choice)
-        raw = _decode(path, reader, roles, progress)
+        raw = _decode(path, reader, roles, _guarded(progress))
     return _assemble(path, roles, raw, types, counts)
 
 

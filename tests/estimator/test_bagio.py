@@ -348,3 +348,20 @@ def test_real_car_mcap_with_truth(shared_data: Path) -> None:
     assert np.all(np.isnan(log.truth.heading))
     assert np.mean(log.imu.accel[:, 2]) == pytest.approx(9.66, abs=0.02)
     assert log.gnss.t[0] == pytest.approx(1533226488.299, abs=0.001)
+
+
+def test_an_exception_from_the_progress_callback_passes_through(tmp_path: Path) -> None:
+    """A caller cancels a load by raising from its progress callback."""
+    imu, gnss, *_ = _streams(n=5000)
+    path = tmp_path / "log.mcap"
+    write_bag(path, imu=imu, gnss=gnss)
+
+    class Cancelled(Exception):
+        pass
+
+    def cancel(fraction: float) -> None:
+        raise Cancelled
+
+    with pytest.raises(Cancelled):
+        load_log(path, cache_dir=tmp_path / "c", progress=cancel)
+    assert not list((tmp_path / "c").glob("log-*.npz"))
