@@ -1,0 +1,820 @@
+"""Drive the EKF over a log and, in GNSS-degraded intervals, the route matcher.
+
+The compiled loop (:func:`estimator.ekf.run_until`) runs from one stop time to the next; the
+driver steps in only at the start of each degraded interval and at each match attempt, where it
+saves a checkpoint (the filter's plain arrays), builds the DR window, calls
+:func:`estimator.matching.match_window` and, if the match is accepted, applies the E/N
+pseudo-position update. A later run with other matching parameters resumes from the first
+checkpoint whose outcome changes (``run(..., reuse=previous)``) instead of from the log start.
+
+When GNSS returns after pseudo-position updates, the first fix widens the E/N position variance
+just enough to cover its own innovation (``ekf._widen_position``) before it is tested: the route
+observations are correlated with each other and with the DR drift, so the filter's position
+covariance after them is optimistic, and without the widening the chi-square gate would reject
+the returning fixes for seconds and then let one through as a late, large jump. Attitude,
+velocity and biases keep their covariances, so the returning fix corrects them through the
+cross-covariances exactly as in normal fusion.
+"""
+
+from __future__ import annotations
+
+import dataclasses
+import math
+import weakref
+from collections.abc import Callable, Sequence
+from dataclasses import dataclass, field
+
+import numpy as np
+from numpy.typing import NDArray
+from scipy.ndimage import uniform_filter1d
+
+from . import ekf
+from .errors import LogError, RoutefuseError
+from .geo import LocalFrame
+from .log import Log
+from .matching import learn_lane_offset, match_window, route_arc_length
+from .params import Method, Params, for_method
+from .results import Epochs, MatchRecord, Run
+from .route import Route
+from .simulate.model import dcm_from_euler, earth_rate_n, normal_gravity
+
+F64 = NDArray[np.float64]
+ProgressFn = Callable[[float], None]
+
+_MG = 9.80665e-3
+_DEG_H = math.pi / 180 / 3600
+_CHUNK_S = 30.0
+"""log seconds per kernel call when progress is reported"""
+
+
+@dataclass(frozen=True)
+class _Inputs:
+    """What the kernel reads: sensor arrays on the IMU clock, in the body frame and the local
+    ENU frame, plus the initial state. Depends on the log, the outages and the filter
+    parameters only."""
+
+    imu_t: F64
+    gyro: F64
+    accel: F64
+    still: NDArray[np.bool_]
+    wheel_t: F64
+    wheel_v: F64
+    gnss_t: F64
+    gnss_pos: F64
+    gnss_var: F64
+    cfg: F64
+    x0: F64
+    P0: F64
+    aux0: F64
+    idx0: NDArray[np.int64]
+    degraded: tuple[tuple[float, float], ...]
+    warnings: tuple[str, ...]
+
+
+@dataclass(frozen=True)
+class _Checkpoint:
+    """The filter at a stop, before anything the driver does there."""
+
+    kind: str
+    """'outage' (start of a degraded interval) or 'attempt' (a match attempt)"""
+    interval: int
+    k: int
+    """attempt counter inside the interval: t = a + min_outage_s + k * interval_s"""
+    x: F64
+    P: F64
+    aux: F64
+    idx: NDArray[np.int64]
+    n_records: int
+    dist_a: float
+    dist_last: float
+
+
+@dataclass(frozen=True)
+class _Resume:
+    log: weakref.ref
+    route: Route | None
+    frame: LocalFrame
+    outages: tuple[tuple[float, float], ...]
+    filter_key: tuple
+    inputs: _Inputs
+    out: F64
+    n_out: int
+    checkpoints: tuple[_Checkpoint, ...]
+    records: tuple[MatchRecord, ...]
+
+
+# ---------------------------------------------------------------------------------------------
+# public entry point
+
+
+def run(
+    log: Log,
+    route: Route | None,
+    params: Params,
+    *,
+    method: Method = "proposed",
+    frame: LocalFrame | None = None,
+    outages: Sequence[tuple[float, float]] = (),
+    progress: ProgressFn | None = None,
+    reuse: Run | None = None,
+) -> Run:
+    """Run one method over a log.
+
+    ``outages``: (start, end) seconds after the log start where GNSS is removed. ``frame``: the
+    session's local frame (default: at the log's first valid fix). ``progress``: called with the
+    fraction done. ``reuse``: a previous run on the same log, route and outages; if only matching
+    parameters differ, the filter resumes from the first match attempt whose outcome changes.
+    """
+    p = for_method(params, method)
+    matching = method != "baseline"
+    if matching and route is None:
+        raise RoutefuseError(None, f"method {method!r} needs a route")
+    outages_t = tuple((float(a), float(b)) for a, b in outages)
+    for a, b in outages_t:
+        if not (math.isfinite(a) and math.isfinite(b)) or b <= a:
+            raise RoutefuseError(None, f"outage {a:g}:{b:g}: END must be after START")
+    if frame is None:
+        frame = _frame_of(log)
+    old = reuse.resume if reuse is not None and isinstance(reuse.resume, _Resume) else None
+    key = _filter_key(p)
+    if old is not None and not (
+        old.log() is log
+        and old.frame == frame
+        and old.outages == outages_t
+        and old.filter_key == key
+        and (
+            route is None
+            or old.route is route
+            or (old.route is not None and np.array_equal(old.route.xy, route.xy))
+        )
+    ):
+        old = None
+    inputs = old.inputs if old is not None else _prepare(log, p, frame, outages_t)
+    driver = _Driver(log, route, p, matching, inputs, progress)
+    if old is not None:
+        driver.resume(
+            old,
+            reuse.params if reuse is not None else p,
+            reuse_matching=(reuse is not None and reuse.method != "baseline"),
+        )
+    else:
+        driver.start()
+    epochs = driver.epochs()
+    if progress is not None:
+        progress(1.0)
+    resume = _Resume(
+        log=weakref.ref(log),
+        route=route,
+        frame=frame,
+        outages=outages_t,
+        filter_key=key,
+        inputs=inputs,
+        out=driver.out,
+        n_out=int(driver.idx[ekf.I_OUT]),
+        checkpoints=tuple(driver.checkpoints),
+        records=tuple(driver.records),
+    )
+    return Run(
+        method=method,
+        params=p,
+        frame=frame,
+        epochs=epochs,
+        matches=tuple(driver.records),
+        degraded_intervals=inputs.degraded,
+        t0=log.t_start,
+        warnings=tuple(log.warnings) + inputs.warnings,
+        resume=resume,
+    )
+
+
+def _filter_key(p: Params) -> tuple:
+    """Everything the filter itself (not the matcher) depends on."""
+    return (p.noise, p.sensors, p.extensions.wheel_scale_state, p.output_rate_hz)
+
+
+def _frame_of(log: Log) -> LocalFrame:
+    ok = log.gnss.valid
+    if not ok.any():
+        raise LogError(log.path, "no valid GNSS fix: the filter cannot be initialised")
+    return LocalFrame.at(log.gnss.lat[ok], log.gnss.lon[ok], log.gnss.alt[ok])
+
+
+# ---------------------------------------------------------------------------------------------
+# preparation: sensor arrays, stationarity, alignment
+
+
+def _prepare(
+    log: Log, p: Params, frame: LocalFrame, outages: tuple[tuple[float, float], ...]
+) -> _Inputs:
+    src = log.path
+    warnings: list[str] = []
+    s = p.sensors
+    imu_t = np.asarray(log.imu.t, np.float64)
+    gyro = np.asarray(log.imu.gyro, np.float64).reshape(-1, 3)
+    accel = np.asarray(log.imu.accel, np.float64).reshape(-1, 3)
+    if not (len(imu_t) == len(gyro) == len(accel)):
+        raise LogError(src, "IMU time, gyro and accel arrays differ in length")
+    ok = np.isfinite(imu_t) & np.all(np.isfinite(gyro), 1) & np.all(np.isfinite(accel), 1)
+    if (~ok).any():
+        warnings.append(f"dropped {int((~ok).sum())} non-finite IMU samples")
+        imu_t, gyro, accel = imu_t[ok], gyro[ok], accel[ok]
+    if len(imu_t) and np.any(np.diff(imu_t) <= 0):
+        order = np.argsort(imu_t, kind="stable")
+        imu_t, gyro, accel = imu_t[order], gyro[order], accel[order]
+        keep = np.r_[True, np.diff(imu_t) > 0]
+        warnings.append(f"IMU time not increasing: sorted, dropped {int((~keep).sum())} repeats")
+        imu_t, gyro, accel = imu_t[keep], gyro[keep], accel[keep]
+    if len(imu_t) < 10:
+        raise LogError(src, f"only {len(imu_t)} usable IMU samples; the filter needs a stream")
+    big = np.diff(imu_t) > 1.0
+    if big.any():
+        warnings.append(
+            f"{int(big.sum())} IMU gaps longer than 1 s (largest "
+            f"{float(np.max(np.diff(imu_t))):.1f} s)"
+        )
+    r_bi = dcm_from_euler(
+        math.radians(s.imu_roll_deg), math.radians(s.imu_pitch_deg), math.radians(s.imu_yaw_deg)
+    ).reshape(3, 3)
+    if not np.allclose(r_bi, np.eye(3)):
+        gyro = gyro @ r_bi.T
+        accel = accel @ r_bi.T
+    gyro = np.ascontiguousarray(gyro)
+    accel = np.ascontiguousarray(accel)
+
+    # wheel speed
+    wheel_t = np.empty(0)
+    wheel_v = np.empty(0)
+    if log.wheel is not None and len(log.wheel.t):
+        wt = np.asarray(log.wheel.t, np.float64) + s.wheel_time_offset_s
+        wv = np.asarray(log.wheel.speed, np.float64)
+        good = np.isfinite(wt) & np.isfinite(wv)
+        order = np.argsort(wt[good], kind="stable")
+        wheel_t, wheel_v = wt[good][order], wv[good][order]
+    if len(wheel_t) < 2:
+        warnings.append("no wheel speed: IMU + GNSS with non-holonomic constraints")
+        wheel_t, wheel_v = np.empty(0), np.empty(0)
+
+    # GNSS: valid, not in an injected outage, in the local frame, floored variances
+    g = log.gnss
+    valid = np.asarray(g.valid, bool).copy()
+    rel = np.asarray(g.t, np.float64) - log.t_start
+    for a, b in outages:
+        valid &= ~((rel >= a) & (rel <= b))
+    gt = np.asarray(g.t, np.float64)[valid] + s.gnss_time_offset_s
+    enu = frame.to_enu(g.lat[valid], g.lon[valid], g.alt[valid])
+    cov = np.asarray(g.cov_enu, np.float64).reshape(-1, 3)[valid]
+    n = p.noise
+    h_def, h_floor = n.gnss_sigma_default_m**2, n.gnss_sigma_floor_m**2
+    var = np.empty_like(cov)
+    for i, (d, f) in enumerate(((h_def, h_floor), (h_def, h_floor), (4 * h_def, 4 * h_floor))):
+        c = cov[:, i]
+        var[:, i] = np.maximum(np.where(np.isfinite(c) & (c > 0), c, d), f)
+    good = np.all(np.isfinite(enu), 1) & np.isfinite(gt)
+    order = np.argsort(gt[good], kind="stable")
+    gnss_t = gt[good][order]
+    gnss_pos = np.ascontiguousarray(enu[good][order])
+    gnss_var = np.ascontiguousarray(var[good][order])
+    if len(gnss_t) == 0:
+        raise LogError(src, "no valid GNSS fix outside the outages: the filter cannot start")
+
+    still = _stationary(imu_t, gyro, accel, wheel_t, wheel_v, p)
+    cfg = _config(p, frame, wheel_t)
+    x0, P0, k0, t_fix = _align(
+        src, imu_t, gyro, accel, still, wheel_t, wheel_v, gnss_t, gnss_pos, gnss_var, p, cfg
+    )
+    aux0 = np.zeros(ekf.NA)
+    t_init = float(imu_t[k0])
+    aux0[ekf.A_TIME] = t_init
+    aux0[ekf.A_LAST_AID] = t_init
+    aux0[ekf.A_NEXT_OUT] = t_init
+    aux0[ekf.A_REJECT_SINCE] = -1.0
+    aux0[ekf.A_DR : ekf.A_DR + 2] = x0[:2]
+    aux0[ekf.A_PREV_GYRO : ekf.A_PREV_GYRO + 3] = gyro[k0]
+    aux0[ekf.A_PREV_ACCEL : ekf.A_PREV_ACCEL + 3] = accel[k0]
+    idx0 = np.zeros(ekf.NI, np.int64)
+    idx0[ekf.I_IMU] = k0 + 1
+    idx0[ekf.I_WHEEL] = np.searchsorted(wheel_t, t_init, side="right")
+    idx0[ekf.I_GNSS] = np.searchsorted(gnss_t, t_fix, side="right")
+    degraded = _degraded_intervals(gnss_t, t_fix, float(imu_t[-1]), s.gnss_gap_s)
+    return _Inputs(
+        imu_t=imu_t,
+        gyro=gyro,
+        accel=accel,
+        still=still,
+        wheel_t=wheel_t,
+        wheel_v=wheel_v,
+        gnss_t=gnss_t,
+        gnss_pos=gnss_pos,
+        gnss_var=gnss_var,
+        cfg=cfg,
+        x0=x0,
+        P0=P0,
+        aux0=aux0,
+        idx0=idx0,
+        degraded=degraded,
+        warnings=tuple(warnings),
+    )
+
+
+def _config(p: Params, frame: LocalFrame, wheel_t: F64) -> F64:
+    n = p.noise
+    cfg = np.zeros(ekf.NC)
+    cfg[ekf.C_COV_DT] = n.propagation_interval_s
+    cfg[ekf.C_ARW2] = (math.radians(n.gyro_arw_deg_sqrt_h) / 60) ** 2
+    cfg[ekf.C_VRW2] = (n.accel_vrw_m_s_sqrt_h / 60) ** 2
+    cfg[ekf.C_TAU_G] = n.gyro_bias_tau_s
+    cfg[ekf.C_QBG] = 2 * (n.gyro_bias_sigma_deg_h * _DEG_H) ** 2 / n.gyro_bias_tau_s
+    cfg[ekf.C_TAU_A] = n.accel_bias_tau_s
+    cfg[ekf.C_QBA] = 2 * (n.accel_bias_sigma_mg * _MG) ** 2 / n.accel_bias_tau_s
+    cfg[ekf.C_WHEEL_VAR] = n.wheel_speed_sigma_m_s**2
+    cfg[ekf.C_NHC_VAR] = n.nhc_sigma_m_s**2
+    cfg[ekf.C_ZUPT_VAR] = n.zupt_sigma_m_s**2
+    cfg[ekf.C_GNSS_GATE] = n.gnss_chi2_gate
+    cfg[ekf.C_LEVER : ekf.C_LEVER + 3] = p.sensors.gnss_lever_arm_m
+    cfg[ekf.C_GRAVITY] = normal_gravity(frame.lat0, frame.h0)
+    cfg[ekf.C_WIE : ekf.C_WIE + 3] = earth_rate_n(frame.lat0)
+    cfg[ekf.C_OUT_DT] = 1.0 / p.output_rate_hz
+    cfg[ekf.C_AID_DT] = 1.0 / n.aid_rate_hz
+    cfg[ekf.C_SCALE_ON] = float(p.extensions.wheel_scale_state and len(wheel_t) > 0)
+    cfg[ekf.C_RESET_S] = n.gnss_reset_after_s
+    gap = float(np.median(np.diff(wheel_t))) if len(wheel_t) > 1 else 0.0
+    cfg[ekf.C_WHEEL_GAP] = max(0.5, 5 * gap)
+    return cfg
+
+
+def _stationary(
+    imu_t: F64, gyro: F64, accel: F64, wheel_t: F64, wheel_v: F64, p: Params
+) -> NDArray[np.bool_]:
+    """Per IMU sample: the vehicle is stopped. With wheel speed: the wheels say so and the
+    gyro, averaged over 0.5 s, is quiet; without: the gyro is quiet and |accel| barely varies."""
+    n = p.noise
+    dt = float(np.median(np.diff(imu_t)))
+    m = max(3, round(0.5 / max(dt, 1e-4)))
+    g_mean = uniform_filter1d(gyro, m, axis=0, mode="nearest")
+    quiet = np.linalg.norm(g_mean, axis=1) < math.radians(n.zupt_gyro_deg_s)
+    a = np.linalg.norm(accel, axis=1)
+    a_var = uniform_filter1d(a * a, m, mode="nearest") - uniform_filter1d(a, m, mode="nearest") ** 2
+    imu_still = quiet & (np.sqrt(np.maximum(a_var, 0)) < n.zupt_accel_std_m_s2)
+    if len(wheel_t) < 2:
+        return imu_still
+    j = np.clip(np.searchsorted(wheel_t, imu_t), 1, len(wheel_t) - 1)
+    gap = wheel_t[j] - wheel_t[j - 1]
+    covered = (imu_t >= wheel_t[0] - 0.5) & (imu_t <= wheel_t[-1] + 0.5) & (gap <= 1.0)
+    ws = np.interp(imu_t, wheel_t, np.abs(wheel_v))
+    return np.where(covered, (ws < n.zupt_speed_m_s) & quiet, imu_still)
+
+
+def _align(
+    src: str,
+    imu_t: F64,
+    gyro: F64,
+    accel: F64,
+    still: NDArray[np.bool_],
+    wheel_t: F64,
+    wheel_v: F64,
+    gnss_t: F64,
+    gnss_pos: F64,
+    gnss_var: F64,
+    p: Params,
+    cfg: F64,
+) -> tuple[F64, F64, int, float]:
+    """Initial state and covariance at the IMU sample of the aligning fix.
+
+    Heading: configured, or the chord between the first two fixes ``align_distance_m`` apart
+    (at the chord's mid-time), carried to the second fix with the gyro. Roll and pitch: the
+    accelerometer averaged over the last second, less the motion's own acceleration (from the
+    wheel or GNSS speed and the yaw rate). Covariances say how good each of these is.
+    """
+    s = p.sensors
+    n = p.noise
+    first_imu = imu_t[0]
+    use = np.flatnonzero(gnss_t >= first_imu)
+    if len(use) == 0:
+        raise LogError(src, "every GNSS fix is before the first IMU sample")
+    yaw_rate = gyro[:, 2]
+    cum_yaw = np.r_[0.0, np.cumsum(0.5 * (yaw_rate[1:] + yaw_rate[:-1]) * np.diff(imu_t))]
+
+    def yaw_between(t0: float, t1: float) -> float:
+        return float(np.interp(t1, imu_t, cum_yaw) - np.interp(t0, imu_t, cum_yaw))
+
+    if s.initial_heading_deg is not None:
+        j = int(use[0])
+        yaw = math.radians(s.initial_heading_deg)
+        sig_yaw = math.radians(2.0)
+        speed = None
+    else:
+        d_min = s.align_distance_m
+        max_span = max(20.0, d_min / 0.5)
+        j = -1
+        for i in use:
+            hi = np.searchsorted(gnss_t, gnss_t[i] + max_span, side="right")
+            d = np.hypot(*(gnss_pos[i + 1 : hi, :2] - gnss_pos[i, :2]).T)
+            far = np.flatnonzero(d >= d_min)
+            if len(far) == 0:
+                continue
+            jj = int(i + 1 + far[0])
+            turn = yaw_between(gnss_t[i], gnss_t[jj])
+            if abs(turn) > math.radians(30):
+                continue
+            chord = gnss_pos[jj, :2] - gnss_pos[i, :2]
+            t_mid = 0.5 * (gnss_t[i] + gnss_t[jj])
+            yaw = math.atan2(chord[1], chord[0]) + yaw_between(t_mid, gnss_t[jj])
+            if len(wheel_t) > 1:
+                w_sel = (wheel_t >= gnss_t[i]) & (wheel_t <= gnss_t[jj])
+                if w_sel.any() and np.mean(wheel_v[w_sel]) < 0:
+                    yaw += math.pi
+            sig_h = math.sqrt(gnss_var[i, 0] + gnss_var[jj, 0])
+            sig_yaw = math.sqrt(
+                (sig_h / float(np.hypot(*chord))) ** 2 + (0.2 * turn) ** 2 + math.radians(1.0) ** 2
+            )
+            speed = float(np.hypot(*chord)) / (gnss_t[jj] - gnss_t[i])
+            j = jj
+            break
+        if j < 0:
+            raise LogError(
+                src,
+                f"cannot align: the GNSS track never moves {d_min:g} m in a "
+                "fairly straight line; set sensors.initial_heading_deg",
+            )
+    t_fix = float(gnss_t[j])
+    k0 = int(np.searchsorted(imu_t, t_fix, side="right") - 1)
+    k0 = max(k0, 0)
+    t0 = float(imu_t[k0])
+
+    # speed and along-track acceleration at t0
+    if len(wheel_t) > 1 and wheel_t[0] <= t0 + 0.5 and wheel_t[-1] >= t0 - 0.5:
+        speed = float(np.interp(t0, wheel_t, wheel_v))
+        sel = (wheel_t >= t0 - 1.0) & (wheel_t <= t0)
+        if sel.sum() >= 2 and np.ptp(wheel_t[sel]) > 0.2:
+            acc_x = float(np.polyfit(wheel_t[sel] - t0, wheel_v[sel], 1)[0])
+        else:
+            acc_x = 0.0
+    else:
+        if speed is None:
+            speed = 0.0
+        acc_x = 0.0
+    if still[k0]:
+        speed = 0.0
+    # roll, pitch from the accelerometer over the last second
+    sel = (imu_t >= t0 - 1.0) & (imu_t <= t0)
+    f = accel[sel].mean(axis=0) if sel.any() else accel[k0]
+    w_z = float(gyro[sel, 2].mean()) if sel.any() else 0.0
+    up = f - np.array([acc_x, speed * w_z, 0.0])
+    up /= max(float(np.linalg.norm(up)), 1e-9)
+    roll = math.atan2(up[1], up[2])
+    pitch = math.atan2(up[0], math.hypot(up[1], up[2]))
+    sig_tilt = math.radians(0.3 if still[sel].all() else 1.5)
+    q = ekf.euler_to_quat(roll, pitch, yaw)
+    C = np.empty((3, 3))
+    ekf.quat_to_dcm(q, C)
+    v = np.array([math.cos(yaw), math.sin(yaw), 0.0]) * speed
+    lever = C @ np.asarray(s.gnss_lever_arm_m, np.float64)
+    x0 = np.zeros(ekf.NX)
+    x0[ekf.X_POS : ekf.X_POS + 3] = gnss_pos[j] - lever - v * (t_fix - t0)
+    x0[ekf.X_VEL : ekf.X_VEL + 3] = v
+    x0[ekf.X_QUAT : ekf.X_QUAT + 4] = q
+    x0[ekf.X_SCALE] = 1.0
+    sig_v = n.velocity_init_sigma_m_s
+    diag = np.zeros(ekf.NE)
+    diag[0:3] = [sig_tilt**2, sig_tilt**2, sig_yaw**2]
+    diag[3:6] = sig_v**2
+    diag[6:9] = gnss_var[j]
+    diag[9:12] = (n.gyro_bias_init_sigma_deg_h * _DEG_H) ** 2
+    diag[12:15] = (n.accel_bias_init_sigma_mg * _MG) ** 2
+    diag[15] = n.wheel_scale_sigma**2 if cfg[ekf.C_SCALE_ON] > 0 else 0.0
+    return x0, np.diag(diag), k0, t_fix
+
+
+def _degraded_intervals(
+    gnss_t: F64, t_start: float, t_end: float, gap_s: float
+) -> tuple[tuple[float, float], ...]:
+    """Stretches after ``t_start`` with no valid fix for longer than ``gap_s``: (last fix,
+    next fix), or (last fix, log end)."""
+    ft = gnss_t[(gnss_t >= t_start) & (gnss_t <= t_end)]
+    edges = np.r_[ft, t_end]
+    d = np.diff(edges)
+    return tuple((float(edges[i]), float(edges[i + 1])) for i in np.flatnonzero(d > gap_s))
+
+
+# ---------------------------------------------------------------------------------------------
+# the driver
+
+
+@dataclass
+class _Track:
+    """Where on the route the vehicle is, and the lane offset of the current interval."""
+
+    lane: float = 0.0
+    s: float | None = None
+    s_dist: float = 0.0
+
+
+@dataclass
+class _Driver:
+    log: Log
+    route: Route | None
+    p: Params
+    matching: bool
+    inp: _Inputs
+    progress: ProgressFn | None
+    x: F64 = field(init=False)
+    P: F64 = field(init=False)
+    aux: F64 = field(init=False)
+    idx: NDArray[np.int64] = field(init=False)
+    out: F64 = field(init=False)
+    checkpoints: list[_Checkpoint] = field(default_factory=list)
+    records: list[MatchRecord] = field(default_factory=list)
+    track: _Track = field(default_factory=_Track)
+
+    # --- state handling
+    def _set_state(self, x: F64, P: F64, aux: F64, idx: NDArray[np.int64]) -> None:
+        self.x, self.P, self.aux, self.idx = x.copy(), P.copy(), aux.copy(), idx.copy()
+
+    def _checkpoint(
+        self, kind: str, interval: int, k: int, dist_a: float, dist_last: float
+    ) -> None:
+        self.checkpoints.append(
+            _Checkpoint(
+                kind=kind,
+                interval=interval,
+                k=k,
+                x=self.x.copy(),
+                P=self.P.copy(),
+                aux=self.aux.copy(),
+                idx=self.idx.copy(),
+                n_records=len(self.records),
+                dist_a=dist_a,
+                dist_last=dist_last,
+            )
+        )
+
+    def _alloc(self) -> None:
+        inp = self.inp
+        span = float(inp.imu_t[-1] - inp.imu_t[inp.idx0[ekf.I_IMU] - 1])
+        n = int(span * self.p.output_rate_hz) + 16
+        if self.matching:
+            tr = self.p.trigger
+            n += sum(int((b - a) / tr.interval_s) + 2 for a, b in inp.degraded)
+        self.out = np.zeros((n, ekf.NO))
+
+    def _grow(self) -> None:
+        self.out = np.vstack([self.out, np.zeros((len(self.out) // 2 + 16, ekf.NO))])
+
+    def _advance(self, t_stop: float) -> None:
+        inp = self.inp
+        t_end = float(inp.imu_t[-1])
+        t_first = float(inp.imu_t[inp.idx0[ekf.I_IMU] - 1])
+        while True:
+            t_now = self.aux[ekf.A_TIME]
+            target = t_stop
+            if self.progress is not None:
+                target = min(t_stop, t_now + _CHUNK_S)
+            status = ekf.run_until(
+                target,
+                self.x,
+                self.P,
+                self.aux,
+                self.idx,
+                inp.imu_t,
+                inp.gyro,
+                inp.accel,
+                inp.still,
+                inp.wheel_t,
+                inp.wheel_v,
+                inp.gnss_t,
+                inp.gnss_pos,
+                inp.gnss_var,
+                inp.cfg,
+                self.out,
+            )
+            if status == ekf.STATUS_FULL:
+                self._grow()
+                continue
+            if status == ekf.STATUS_DIVERGED:
+                raise LogError(
+                    self.log.path,
+                    "the filter diverged (non-finite state) at "
+                    f"t = {self.aux[ekf.A_TIME] - self.log.t_start:.2f} s",
+                )
+            if self.progress is not None:
+                span = max(t_end - t_first, 1e-9)
+                self.progress(min(1.0, (self.aux[ekf.A_TIME] - t_first) / span))
+            if target >= t_stop or self.idx[ekf.I_IMU] >= len(inp.imu_t):
+                return
+
+    def _write_row(self) -> int:
+        if self.idx[ekf.I_OUT] >= len(self.out) - 1:
+            self._grow()
+        ekf.write_row(self.x, self.P, self.aux, self.idx, self.out)
+        return int(self.idx[ekf.I_OUT]) - 1
+
+    # --- the route part
+    def _begin_interval(self, t_a: float, out: F64, n_out: int, x: F64, aux: F64) -> None:
+        rows = out[:n_out]
+        tr = self.track
+        pred = None if tr.s is None else tr.s + (aux[ekf.A_DIST] - tr.s_dist)
+        tr.s = route_arc_length(self.route, x[:2], s_guess=pred, params=self.p)
+        tr.s_dist = float(aux[ekf.A_DIST])
+        tr.lane = learn_lane_offset(
+            rows[:, ekf.O_T],
+            rows[:, ekf.O_POS : ekf.O_POS + 2],
+            rows[:, ekf.O_GNSS] > 0,
+            self.route,
+            t_end=t_a,
+            params=self.p,
+            s_guess=tr.s,
+        )
+
+    def _window(self, out: F64, n_out: int, x: F64, aux: F64) -> F64:
+        """The DR track over the last ``window.length_m`` of travel, integrated from the
+        mechanised velocity only (no correction jumps), translated to end at the estimate."""
+        dist = out[:n_out, ekf.O_DIST]
+        d_now = float(aux[ekf.A_DIST])
+        i0 = max(int(np.searchsorted(dist, d_now - self.p.window.length_m, side="right")) - 1, 0)
+        dr = np.vstack([out[i0:n_out, ekf.O_DR : ekf.O_DR + 2], aux[ekf.A_DR : ekf.A_DR + 2]])
+        d = np.r_[dist[i0:], d_now]
+        keep = np.r_[np.diff(d) > 1e-6, True]
+        dr = dr[keep]
+        return dr + (x[:2] - aux[ekf.A_DR : ekf.A_DR + 2])
+
+    def _match(self, out: F64, n_out: int, x: F64, P: F64, aux: F64) -> MatchRecord:
+        """One attempt's match (P must be propagated to the attempt time)."""
+        tr = self.track
+        pred = None if tr.s is None else tr.s + (aux[ekf.A_DIST] - tr.s_dist)
+        return match_window(
+            self._window(out, n_out, x, aux),
+            x[:2].copy(),
+            P[6:8, 6:8].copy(),
+            self.route,
+            s_guess=pred,
+            lane_offset=tr.lane,
+            params=self.p,
+            index=len(self.records),
+            t=float(aux[ekf.A_TIME]),
+            epoch=n_out,
+        )
+
+    def _after_match(self, rec: MatchRecord, x_after: F64, aux: F64) -> None:
+        if rec.accepted:
+            tr = self.track
+            pred = None if tr.s is None else tr.s + (aux[ekf.A_DIST] - tr.s_dist)
+            tr.s = route_arc_length(self.route, x_after[:2], s_guess=pred, params=self.p)
+            tr.s_dist = float(aux[ekf.A_DIST])
+
+    def _attempt_live(self) -> None:
+        ekf.flush_covariance(self.P, self.aux, self.inp.cfg)
+        n_out = int(self.idx[ekf.I_OUT])
+        rec = self._match(self.out, n_out, self.x, self.P, self.aux)
+        innovation, correction = rec.innovation, np.zeros(2)
+        if rec.accepted:
+            res = ekf.pseudo_position_update(
+                self.x,
+                self.P,
+                self.aux,
+                self.inp.cfg,
+                np.asarray(rec.pseudo_position, float),
+                np.asarray(rec.obs_cov, float),
+            )
+            innovation, correction = res[:2].copy(), res[2:].copy()
+            if not ekf._finite(self.x, self.P):
+                raise LogError(
+                    self.log.path,
+                    "the filter diverged (non-finite state) after "
+                    f"the route update at t = {rec.t - self.log.t_start:.2f} s",
+                )
+        epoch = self._write_row()
+        rec = dataclasses.replace(rec, epoch=epoch, innovation=innovation, correction=correction)
+        self.records.append(rec)
+        self._after_match(rec, self.x, self.aux)
+
+    # --- the loop
+    def start(self) -> None:
+        inp = self.inp
+        self._set_state(inp.x0, inp.P0, inp.aux0, inp.idx0)
+        self._alloc()
+        self._write_row()
+        self.aux[ekf.A_NEXT_OUT] = self.aux[ekf.A_TIME] + inp.cfg[ekf.C_OUT_DT]
+        self._loop(0, None)
+
+    def _loop(self, i0: int, at: _Checkpoint | None) -> None:
+        """Run live from the start of interval ``i0``, or from the attempt checkpoint ``at``
+        (whose attempt is redone)."""
+        tr = self.p.trigger
+        spacing = self.p.window.spacing_m
+        for i in range(i0, len(self.inp.degraded)):
+            a, b = self.inp.degraded[i]
+            if at is not None and i == at.interval:
+                k, dist_a, dist_last = at.k, at.dist_a, at.dist_last
+            else:
+                self._advance(a)
+                dist_a = float(self.aux[ekf.A_DIST])
+                dist_last = -math.inf
+                k = 0
+                self._checkpoint("outage", i, 0, dist_a, dist_last)
+                if not self.matching:
+                    continue
+                self._begin_interval(a, self.out, int(self.idx[ekf.I_OUT]), self.x, self.aux)
+            while True:
+                t_try = a + tr.min_outage_s + k * tr.interval_s
+                if t_try >= b or t_try > self.inp.imu_t[-1]:
+                    break
+                if at is None or i != at.interval or k != at.k:
+                    self._advance(t_try)
+                d = float(self.aux[ekf.A_DIST])
+                if d - dist_a >= tr.min_outage_distance_m and d - dist_last >= spacing:
+                    if at is None or i != at.interval or k != at.k:
+                        self._checkpoint("attempt", i, k, dist_a, dist_last)
+                    self._attempt_live()
+                    dist_last = d
+                k += 1
+            at = None
+        self._advance(math.inf)
+
+    def resume(self, old: _Resume, old_params: Params, *, reuse_matching: bool) -> None:
+        """Replay the old run's checkpoints with the new matching parameters until one gives a
+        different outcome, then run live from there."""
+        self.out = old.out
+        outage_cps = [c for c in old.checkpoints if c.kind == "outage"]
+        same_trigger = self.p.trigger == old_params.trigger
+        if not self.matching or not reuse_matching or not same_trigger:
+            if not outage_cps:
+                self._copy_old(old, len(old.checkpoints), old.n_out)
+                self.records = []
+                return
+            first = outage_cps[0]
+            self._restart(old, first, old.checkpoints.index(first), [])
+            self._loop(first.interval, None)
+            return
+        records: list[MatchRecord] = []
+        for n_cp, cp in enumerate(old.checkpoints):
+            n_out = int(cp.idx[ekf.I_OUT])
+            if cp.kind == "outage":
+                a = self.inp.degraded[cp.interval][0]
+                self._begin_interval(a, old.out, n_out, cp.x, cp.aux)
+                continue
+            P = cp.P.copy()
+            aux = cp.aux.copy()
+            ekf.flush_covariance(P, aux, self.inp.cfg)
+            self.records = records
+            rec = self._match(old.out, n_out, cp.x, P, aux)
+            prev = old.records[cp.n_records]
+            if not _same_outcome(rec, prev):
+                self._restart(old, cp, n_cp + 1, records)
+                self._loop(cp.interval, cp)
+                return
+            rec = dataclasses.replace(
+                rec, epoch=prev.epoch, innovation=prev.innovation, correction=prev.correction
+            )
+            records.append(rec)
+            x_after = old.out[prev.epoch, ekf.O_POS : ekf.O_POS + 3]
+            self._after_match(rec, x_after, aux)
+        self._copy_old(old, len(old.checkpoints), old.n_out)
+        self.records = records
+
+    def _copy_old(self, old: _Resume, n_checkpoints: int, n_out: int) -> None:
+        self.out = old.out
+        self.checkpoints = list(old.checkpoints[:n_checkpoints])
+        self.idx = np.zeros(ekf.NI, np.int64)
+        self.idx[ekf.I_OUT] = n_out
+
+    def _restart(
+        self, old: _Resume, cp: _Checkpoint, n_keep: int, records: list[MatchRecord]
+    ) -> None:
+        self.checkpoints = list(old.checkpoints[:n_keep])
+        self.records = list(records)
+        self._set_state(cp.x, cp.P, cp.aux, cp.idx)
+        self.out = old.out.copy()
+
+    def epochs(self) -> Epochs:
+        n = int(self.idx[ekf.I_OUT])
+        o = self.out[:n]
+        t = o[:, ekf.O_T].copy()
+        starts = np.array([a for a, _ in self.inp.degraded])
+        ends = np.array([b for _, b in self.inp.degraded])
+        if len(starts):
+            j = np.searchsorted(starts, t, side="right") - 1
+            degraded = (j >= 0) & (t <= ends[np.clip(j, 0, None)])
+        else:
+            degraded = np.zeros(n, bool)
+        return Epochs(
+            t=t,
+            position=np.ascontiguousarray(o[:, ekf.O_POS : ekf.O_POS + 3]),
+            velocity=np.ascontiguousarray(o[:, ekf.O_VEL : ekf.O_VEL + 3]),
+            attitude=np.ascontiguousarray(o[:, ekf.O_RPY : ekf.O_RPY + 3]),
+            position_sigma=np.ascontiguousarray(o[:, ekf.O_SIG_POS : ekf.O_SIG_POS + 3]),
+            yaw_sigma=o[:, ekf.O_SIG_YAW].copy(),
+            gnss_used=o[:, ekf.O_GNSS] > 0,
+            degraded=degraded,
+        )
+
+
+def _same_outcome(new: MatchRecord, old: MatchRecord) -> bool:
+    """Whether a re-evaluated attempt leaves the filter exactly as the old one did."""
+    if new.accepted != old.accepted:
+        return False
+    if not new.accepted:
+        return True
+    return bool(
+        np.array_equal(new.pseudo_position, old.pseudo_position)
+        and np.array_equal(new.obs_cov, old.obs_cov)
+    )
