@@ -190,7 +190,7 @@ def monaco_tunnel() -> Scenario:
 
 
 def short_tunnel() -> Scenario:
-    """A 70 s drive for tests: a turn, a 400 m tunnel, open sky."""
+    """A 75 s drive for tests: a turn, a 400 m tunnel, open sky."""
     pieces = (
         straight(150, speed_m_s=15.0)
         + turn(60, 200)
@@ -200,7 +200,7 @@ def short_tunnel() -> Scenario:
     )
     return Scenario(
         name="short_tunnel",
-        description="70 s test drive with one 400 m tunnel",
+        description="75 s test drive with one 400 m tunnel",
         pieces=pieces,
         origin=(45.0, 7.0, 300.0),
         heading0_deg=0.0,

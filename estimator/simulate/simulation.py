@@ -2,10 +2,11 @@
 
 from __future__ import annotations
 
+import shutil
 from collections.abc import Callable
 from dataclasses import dataclass, replace
 from pathlib import Path
-from typing import Any
+from typing import Any, Literal
 
 import numpy as np
 from numpy.typing import NDArray
@@ -100,19 +101,28 @@ class Simulation:
         )
 
     def write(
-        self, out_dir: str | Path, *, storage: str = "mcap", overwrite: bool = False
+        self,
+        out_dir: str | Path,
+        *,
+        storage: Literal["mcap", "sqlite3", "ros1"] = "mcap",
+        overwrite: bool = False,
     ) -> tuple[Path, Path]:
-        """Write ``<name>.mcap`` and ``<name>.route.geojson`` into ``out_dir``."""
+        """Write the bag (``<name>.mcap``, a ``<name>/`` sqlite3 bag folder or ``<name>.bag``)
+        and ``<name>.route.geojson`` into ``out_dir``; returns both paths."""
         from ..bagwrite import write_bag
 
         out = Path(out_dir)
         out.mkdir(parents=True, exist_ok=True)
-        bag = out / f"{self.scenario.name}.mcap"
+        suffix = {"mcap": ".mcap", "sqlite3": "", "ros1": ".bag"}[storage]
+        bag = out / f"{self.scenario.name}{suffix}"
         route = out / f"{self.scenario.name}.route.geojson"
         if bag.exists():
             if not overwrite:
                 raise ConfigError(bag, "already exists (pass overwrite to replace it)")
-            bag.unlink()
+            if bag.is_dir():
+                shutil.rmtree(bag)
+            else:
+                bag.unlink()
         write_bag(
             bag,
             imu=self.imu,
@@ -120,7 +130,7 @@ class Simulation:
             wheel=self.wheel,
             truth=self.truth_fix,
             storage=storage,
-        )  # type: ignore[arg-type]
+        )
         write_geojson(route, self.route_geojson())
         return bag, route
 
