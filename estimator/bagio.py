@@ -234,69 +234,141 @@ def _roles(path: Path, types: dict[str, str], choice: TopicChoice) -> _Roles:
 # ---------------------------------------------------------------------------------------------
 
 
-class _Columns:
-    """Preallocated float64 columns for one topic, grown if a count was wrong."""
+_Field = tuple[str, str]  # (dotted message path, numpy kind)
+_STAMP: tuple[_Field, ...] = (("header.stamp.sec", "i4"), ("header.stamp.nanosec", "u4"))
+_FIELDS: dict[str, tuple[_Field, ...]] = {
+    "imu": tuple(
+        (f"{v}.{a}", "f8") for v in ("angular_velocity", "linear_acceleration") for a in "xyz"
+    ),
+    "fix": (
+        ("latitude", "f8"),
+        ("longitude", "f8"),
+        ("altitude", "f8"),
+        ("status.status", "i1"),
+        ("position_covariance[0]", "f8"),
+        ("position_covariance[4]", "f8"),
+        ("position_covariance[8]", "f8"),
+        ("position_covariance_type", "u1"),
+    ),
+    ODOM_TYPE: (("twist.twist.linear.x", "f8"),),
+    TWIST_TYPE: (("twist.linear.x", "f8"),),
+    "pose": tuple((f"pose.pose.orientation.{a}", "f8") for a in "xyzw"),
+}
+CHUNK = 20_000
 
-    def __init__(self, n: int, width: int) -> None:
-        self.t = np.empty(max(n, 1))
-        self.v = np.empty((max(n, 1), width))
-        self.n = 0
-        self.frame_id = ""
 
-    def row(self, t: float) -> NDArray[np.float64]:
-        if self.n == len(self.t):
-            self.t = np.resize(self.t, 2 * self.n)
-            self.v = np.resize(self.v, (2 * self.n, self.v.shape[1]))
-        self.t[self.n] = t
-        self.n += 1
-        return self.v[self.n - 1]
+def _get(msg: Any, path: str) -> float:
+    obj = msg
+    for part in path.split("."):
+        if part.endswith("]"):
+            name, idx = part[:-1].split("[")
+            obj = getattr(obj, name)[int(idx)]
+        else:
+            obj = getattr(obj, part)
+    return float(obj)
+
+
+class _Stream:
+    """Raw messages of one topic, decoded in chunks into float64 columns.
+
+    Every message of one byte length shares its layout (frame ids of constant length), so
+    the fields are cut out of the raw bytes at offsets found once per layout by serialising
+    probe messages; sampled messages are fully deserialised to confirm. A layout that cannot
+    be confirmed (big-endian CDR, odd strings) is decoded message by message.
+    """
+
+    def __init__(self, reader: Any, msgtype: str, fields: tuple[_Field, ...]) -> None:
+        self.reader = reader
+        self.msgtype = msgtype
+        self.fields = _STAMP + fields
+        self.recv: list[int] = []
+        self.raws: list[bytes] = []
+        self.chunks: list[F64] = []
+        self.layouts: dict[int, list[int] | None] = {}
+        self.first: Any = None
+
+    def add(self, recv_ns: int, raw: bytes) -> None:
+        if self.first is None:
+            self.first = self.reader.deserialize(raw, self.msgtype)
+        self.recv.append(recv_ns)
+        self.raws.append(bytes(raw))
+        if len(self.raws) >= CHUNK:
+            self.flush()
+
+    def flush(self) -> None:
+        if not self.raws:
+            return
+        n = len(self.raws)
+        out = np.empty((n, len(self.fields)))
+        lengths = np.fromiter(map(len, self.raws), np.int64, n)
+        for size in np.unique(lengths).tolist():
+            idx = np.flatnonzero(lengths == size)
+            offsets = self._layout(size, self.raws[idx[0]])
+            if offsets is None or not self._cut(out, idx, size, offsets):
+                for i in idx.tolist():
+                    msg = self.reader.deserialize(self.raws[i], self.msgtype)
+                    out[i] = [_get(msg, f) for f, _ in self.fields]
+        recv = np.array(self.recv, np.float64) * 1e-9
+        stamp = out[:, 0] + out[:, 1] * 1e-9
+        zero = (out[:, 0] == 0) & (out[:, 1] == 0)
+        self.chunks.append(np.column_stack([np.where(zero, recv, stamp), out[:, 2:]]))
+        self.recv, self.raws = [], []
 
     def arrays(self) -> tuple[F64, F64]:
-        return self.t[: self.n].copy(), self.v[: self.n].copy()
+        self.flush()
+        if not self.chunks:
+            return np.zeros(0), np.zeros((0, len(self.fields) - 2))
+        all_rows = np.concatenate(self.chunks)
+        return all_rows[:, 0].copy(), np.ascontiguousarray(all_rows[:, 1:])
+
+    def _layout(self, size: int, raw: bytes) -> list[int] | None:
+        if size not in self.layouts:
+            self.layouts[size] = _find_offsets(self.reader, self.msgtype, raw, self.fields)
+        return self.layouts[size]
+
+    def _cut(self, out: F64, idx: NDArray[np.intp], size: int, offsets: list[int]) -> bool:
+        buf = np.frombuffer(b"".join(self.raws[i] for i in idx.tolist()), np.uint8)
+        buf = buf.reshape(len(idx), size)
+        for k, ((_, kind), off) in enumerate(zip(self.fields, offsets, strict=True)):
+            width = np.dtype(kind).itemsize
+            out[idx, k] = buf[:, off : off + width].copy().view("<" + kind)[:, 0]
+        probe = np.unique(np.r_[idx[:: max(len(idx) // 8, 1)], idx[-1]])
+        for i in probe.tolist():
+            msg = self.reader.deserialize(self.raws[i], self.msgtype)
+            want = np.array([_get(msg, f) for f, _ in self.fields])
+            if not np.array_equal(want, out[i], equal_nan=True):
+                return False
+        return True
 
 
-def _stamp(msg: Any, recv_ns: int) -> float:
-    st = msg.header.stamp
-    if st.sec == 0 and st.nanosec == 0:
-        return recv_ns * 1e-9
-    return st.sec + st.nanosec * 1e-9
+def _find_offsets(
+    reader: Any, msgtype: str, raw: bytes, fields: tuple[_Field, ...]
+) -> list[int] | None:
+    """Byte offset of every field in messages laid out like ``raw``, or None."""
+    from .bagwrite import _PROBE, _set
 
-
-def _fill_imu(col: _Columns, msg: Any, t: float) -> None:
-    r = col.row(t)
-    w, a = msg.angular_velocity, msg.linear_acceleration
-    r[0], r[1], r[2], r[3], r[4], r[5] = w.x, w.y, w.z, a.x, a.y, a.z
-
-
-def _fill_fix(col: _Columns, msg: Any, t: float) -> None:
-    r = col.row(t)
-    c = msg.position_covariance
-    r[0], r[1], r[2], r[3] = msg.latitude, msg.longitude, msg.altitude, msg.status.status
-    if msg.position_covariance_type == 0:
-        r[4] = r[5] = r[6] = np.nan
-    else:
-        r[4], r[5], r[6] = c[0], c[4], c[8]
-
-
-def _fill_odom_speed(col: _Columns, msg: Any, t: float) -> None:
-    col.row(t)[0] = msg.twist.twist.linear.x
-
-
-def _fill_twist_speed(col: _Columns, msg: Any, t: float) -> None:
-    col.row(t)[0] = msg.twist.linear.x
-
-
-def _fill_yaw(col: _Columns, msg: Any, t: float) -> None:
-    q = msg.pose.pose.orientation
-    col.row(t)[0] = np.arctan2(2.0 * (q.w * q.z + q.x * q.y), 1.0 - 2.0 * (q.y * q.y + q.z * q.z))
-
-
-_FILLERS: dict[str, tuple[Callable[[_Columns, Any, float], None], int]] = {
-    "imu": (_fill_imu, 6),
-    "gnss": (_fill_fix, 7),
-    "truth": (_fill_fix, 7),
-    "truth_pose": (_fill_yaw, 1),
-}
+    ts = reader.typestore
+    serialize = ts.serialize_cdr if reader.is2 else ts.serialize_ros1
+    try:
+        msg = reader.deserialize(raw, msgtype)
+        if bytes(serialize(msg, msgtype)) != bytes(raw):
+            return None
+        offsets = []
+        for path, kind in fields:
+            a, b = (
+                np.frombuffer(serialize(_set(msg, path, v), msgtype), np.uint8)
+                for v in _PROBE[kind]
+            )
+            width = np.dtype(kind).itemsize
+            if len(a) != len(raw) or len(b) != len(raw):
+                return None
+            diff = np.flatnonzero(a != b)
+            if len(diff) != width or diff[-1] - diff[0] != width - 1:
+                return None
+            offsets.append(int(diff[0]))
+        return offsets
+    except Exception:
+        return None
 
 
 def _quat_to_matrix(x: float, y: float, z: float, w: float) -> F64:
@@ -338,30 +410,28 @@ def _decode(
     by_topic: dict[str, list[Any]] = {}
     for conn in reader.connections:
         by_topic.setdefault(conn.topic, []).append(conn)
-    cols: dict[str, _Columns] = {}
-    fill: dict[str, Callable[[_Columns, Any, float], None]] = {}
+    streams: dict[str, _Stream] = {}
+    role_of: dict[str, str] = {}
     for role in ("imu", "gnss", "wheel", "truth", "truth_pose"):
         topic = getattr(roles, role)
         if topic is None:
             continue
-        conns = by_topic[topic]
-        if role == "wheel":
-            fn, width = (
-                (_fill_twist_speed, 1) if conns[0].msgtype == TWIST_TYPE else (_fill_odom_speed, 1)
-            )
-        else:
-            fn, width = _FILLERS[role]
-        cols[topic] = _Columns(sum(int(c.msgcount or 0) for c in conns), width)
-        fill[topic] = fn
-    wanted = [c for t in (*cols, roles.tf_static) if t is not None for c in by_topic[t]]
+        msgtype = by_topic[topic][0].msgtype
+        kind = {"imu": "imu", "gnss": "fix", "truth": "fix", "truth_pose": "pose"}.get(
+            role, msgtype
+        )
+        streams[topic] = _Stream(reader, msgtype, _FIELDS[kind])
+        role_of[topic] = role
+    wanted = [c for t in (*streams, roles.tf_static) if t is not None for c in by_topic[t]]
     total = max(sum(int(c.msgcount or 0) for c in wanted), 1)
-    step = max(total // 100, 1000)
+    step = max(total // 50, 1000)
     edges: list[tuple[str, str, F64]] = []
-    wheel_child = ""
     for done, (conn, recv_ns, raw) in enumerate(reader.messages(connections=wanted), 1):
-        msg = reader.deserialize(raw, conn.msgtype)
-        if conn.topic == roles.tf_static:
-            for tf in msg.transforms:
+        stream = streams.get(conn.topic)
+        if stream is not None:
+            stream.add(recv_ns, raw)
+        else:
+            for tf in reader.deserialize(raw, conn.msgtype).transforms:
                 r = tf.transform.rotation
                 edges.append(
                     (
@@ -370,21 +440,16 @@ def _decode(
                         _quat_to_matrix(r.x, r.y, r.z, r.w),
                     )
                 )
-        else:
-            col = cols[conn.topic]
-            if not col.n:
-                col.frame_id = _frame(msg.header.frame_id)
-                if conn.topic == roles.wheel and conn.msgtype == ODOM_TYPE:
-                    wheel_child = _frame(msg.child_frame_id)
-            fill[conn.topic](col, msg, _stamp(msg, recv_ns))
         if progress is not None and done % step == 0:
             progress(min(done / total, 0.99))
-    out: dict[str, Any] = {
-        role: cols[t]
-        for role in ("imu", "gnss", "wheel", "truth", "truth_pose")
-        if (t := getattr(roles, role)) is not None
-    }
-    out["edges"] = edges
+    out: dict[str, Any] = {"edges": edges}
+    wheel_child = ""
+    for topic, stream in streams.items():
+        t, v = stream.arrays()
+        frame_id = "" if stream.first is None else _frame(stream.first.header.frame_id)
+        out[role_of[topic]] = (t, v, frame_id)
+        if role_of[topic] == "wheel" and stream.msgtype == ODOM_TYPE and stream.first is not None:
+            wheel_child = _frame(stream.first.child_frame_id)
     out["body_candidates"] = [f for f in (wheel_child, *BODY_FRAMES) if f]
     return out
 
@@ -419,14 +484,13 @@ def _assemble(
     path: Path, roles: _Roles, raw: dict[str, Any], types: dict[str, str], counts: dict[str, int]
 ) -> Log:
     warnings: list[str] = []
-    imu_col: _Columns = raw["imu"]
-    t, v = _clean(f"IMU {roles.imu}", *imu_col.arrays(), warnings, drop_nonfinite=True)
+    t, v, imu_frame = raw["imu"]
+    t, v = _clean(f"IMU {roles.imu}", t, v, warnings, drop_nonfinite=True)
     if len(t) < MIN_IMU_SAMPLES:
         raise LogError(
             path, f"too few IMU samples on {roles.imu}: {len(t)} (need at least {MIN_IMU_SAMPLES})"
         )
     gyro, accel = v[:, :3], v[:, 3:6]
-    imu_frame = imu_col.frame_id
     body = next((b for b in raw["body_candidates"] if b), "base_link")
     if raw["edges"] and imu_frame and imu_frame != body:
         rot = _rotation_between(raw["edges"], body, imu_frame)
@@ -437,8 +501,7 @@ def _assemble(
             warnings.append(f"IMU frame {imu_frame}: no /tf_static path to {body}, not rotated")
     imu = ImuData(t, np.ascontiguousarray(gyro), np.ascontiguousarray(accel))
 
-    gnss_col: _Columns = raw["gnss"]
-    gt, gv = _clean(f"GNSS {roles.gnss}", *gnss_col.arrays(), warnings, drop_nonfinite=False)
+    gt, gv = _clean(f"GNSS {roles.gnss}", *raw["gnss"][:2], warnings, drop_nonfinite=False)
     if len(gt) == 0:
         raise LogError(path, f"GNSS topic {roles.gnss} has no messages")
     gnss = _gnss(gt, gv)
@@ -447,26 +510,23 @@ def _assemble(
 
     wheel = None
     if "wheel" in raw:
-        wt, wv = _clean(
-            f"wheel {roles.wheel}", *raw["wheel"].arrays(), warnings, drop_nonfinite=True
-        )
+        wt, wv = _clean(f"wheel {roles.wheel}", *raw["wheel"][:2], warnings, drop_nonfinite=True)
         wheel = WheelData(wt, wv[:, 0].copy()) if len(wt) else None
 
     truth = None
     if "truth" in raw:
-        tt, tv = _clean(
-            f"truth {roles.truth}", *raw["truth"].arrays(), warnings, drop_nonfinite=False
-        )
+        tt, tv = _clean(f"truth {roles.truth}", *raw["truth"][:2], warnings, drop_nonfinite=False)
         heading = np.full(len(tt), np.nan)
         if "truth_pose" in raw:
             pt, pv = _clean(
                 f"truth {roles.truth_pose}",
-                *raw["truth_pose"].arrays(),
+                *raw["truth_pose"][:2],
                 warnings,
                 drop_nonfinite=True,
             )
             if len(pt):
-                yaw = np.unwrap(pv[:, 0])
+                x, y, z, w = pv.T
+                yaw = np.unwrap(np.arctan2(2.0 * (w * z + x * y), 1.0 - 2.0 * (y * y + z * z)))
                 inside = (tt >= pt[0]) & (tt <= pt[-1])
                 heading[inside] = np.angle(np.exp(1j * np.interp(tt[inside], pt, yaw)))
         if len(tt):
@@ -485,7 +545,7 @@ def _gnss(t: F64, v: F64) -> GnssData:
     no_pos = ~(np.isfinite(lat) & np.isfinite(lon) & np.isfinite(alt))
     status[no_pos] = -1
     cov = v[:, 4:7].copy()
-    cov[status < 0] = np.nan
+    cov[(status < 0) | (v[:, 7] == 0)] = np.nan
     return GnssData(t, lat, lon, alt, status, cov)
 
 

@@ -365,3 +365,30 @@ def test_an_exception_from_the_progress_callback_passes_through(tmp_path: Path) 
     with pytest.raises(Cancelled):
         load_log(path, cache_dir=tmp_path / "c", progress=cancel)
     assert not list((tmp_path / "c").glob("log-*.npz"))
+
+
+def test_byte_layout_fast_path_matches_full_deserialisation(tmp_path: Path, monkeypatch) -> None:
+    """Fields cut out of the raw bytes equal what rosbags deserialises, for mixed layouts."""
+    imu, gnss, wheel, truth = _streams(n=3000)
+    a, b = tmp_path / "a.bag", tmp_path / "b.bag"
+    write_bag(a, imu=imu, gnss=gnss, wheel=wheel, truth=truth, storage="ros1")
+    late = ImuData(imu.t + 0.005, imu.gyro[::-1], imu.accel[::-1])
+    write_bag(b, imu=late, storage="ros1", imu_frame="a_much_longer_imu_frame")
+    merged = tmp_path / "merged.bag"
+    _merge([a, b], merged)  # one IMU topic, two message sizes
+    import estimator.bagio as bagio
+
+    found: list[object] = []
+    real = bagio._find_offsets
+    monkeypatch.setattr(
+        bagio, "_find_offsets", lambda *args: found.append(real(*args)) or found[-1]
+    )
+    fast = load_log(merged, cache_dir=tmp_path / "fast")
+    assert len(found) == 6 and all(offsets is not None for offsets in found)  # IMU: 2 sizes
+    monkeypatch.setattr(bagio, "_find_offsets", lambda *args: None)
+    slow = load_log(merged, cache_dir=tmp_path / "slow")
+    assert len(fast.imu.t) == 2 * len(imu.t)
+    for part in ("imu", "gnss", "wheel", "truth"):
+        x, y = getattr(fast, part), getattr(slow, part)
+        for name in x.__dataclass_fields__:
+            np.testing.assert_array_equal(getattr(x, name), getattr(y, name))
