@@ -27,6 +27,8 @@ from .plots import metrics_markdown
 
 SPEEDS = ("0.25x", "0.5x", "1x", "2x", "5x", "10x", "20x", "50x")
 PLAY_RATE_HZ = 15.0
+PANEL_PX = 400.0
+"""width of viser's control panel (large), which hides the right of the 3D view"""
 GROUP_TITLES = {
     "trigger": "trigger",
     "window": "window",
@@ -46,7 +48,9 @@ def _fmt(v: Any, digits: int = 3) -> str:
         f = float(v)
     except (TypeError, ValueError):
         return str(v)
-    return "–" if not np.isfinite(f) else f"{f:.{digits}f}"
+    if not np.isfinite(f):
+        return "–"
+    return f"{f:.{digits}f}" if abs(f) < 1e5 else f"{f:.3g}"
 
 
 def _vec(v: Any, digits: int = 2) -> str:
@@ -68,15 +72,17 @@ def match_markdown(
     lines = [
         f"**Attempt #{m.index} of {total}{when}{age}: {head}**",
         "",
-        "| gate | value | threshold | verdict |",
+        "| gate | value | limit | verdict |",
         "|---|---:|---:|---|",
     ]
+    notes = []
     for g in m.gates:
-        verdict = "✓ passed" if g.passed else "✗ FAILED"
-        note = f" ({g.note})" if g.note else ""
+        verdict = "✓ passed" if g.passed else "✗ **FAILED**"
         lines.append(
-            f"| {g.name}{note} | {_fmt(g.value)} | {g.comparison} {_fmt(g.threshold)} | {verdict} |"
+            f"| {g.name} | {_fmt(g.value)} | {g.comparison} {_fmt(g.threshold)} | {verdict} |"
         )
+        if g.note:
+            notes.append(f"*{g.name}*: {g.note}")
     corr = np.asarray(m.correction, np.float64).reshape(-1)
     corr_norm = float(np.hypot(*corr)) if corr.size == 2 and np.all(np.isfinite(corr)) else np.nan
     cov = np.asarray(m.obs_cov, np.float64)
@@ -98,6 +104,8 @@ def match_markdown(
         f"| obs. 1-sigma E, N | {_vec(sig)} m |",
     ]
     lines += [f"| {k} | {_fmt(v)} |" for k, v in sorted(m.extra.items())]
+    if notes:
+        lines += ["", "<small>" + "; ".join(notes) + "</small>"]
     return "\n".join(lines)
 
 
@@ -423,17 +431,35 @@ class ClientView:
             center, height = np.asarray(xy, float), 250.0
         else:
             center = data.center
-            height = data.extent_m * 0.75
+            height = data.extent_m * 0.6
         if cam.update_timestamp == 0.0:
             self._camera_pending = True  # the browser has not reported its camera yet
             return
         self._camera_pending = False
+        # The control panel covers the right of the view: fit the drive into the rest and
+        # shift the view east so it is centred there (top-down, north up: screen x = east).
+        aspect, free, half_h = self._view_geometry()
+        if not self.follow:
+            height = max(height, data.extent_m * 0.55 / (half_h * aspect * free))
+        center = np.asarray(center, float) + self._panel_shift(height)[:2]
         cam.far = max(10 * height, 1000.0)
         cam.near = max(height / 2000, 0.05)
         cam.up_direction = (0.0, 0.0, 1.0)
         # position first: assigning it drags look_at along, so look_at is set after.
         cam.position = (float(center[0]), float(center[1]) - 0.001 * height, float(height))
         cam.look_at = (float(center[0]), float(center[1]), 0.0)
+
+    def _view_geometry(self) -> tuple[float, float, float]:
+        """Aspect ratio, fraction of the width not under the panel, tan(fov / 2)."""
+        cam = self.client.camera
+        aspect = float(cam.aspect) if np.isfinite(cam.aspect) and cam.aspect > 0 else 1.5
+        width_px = float(cam.image_width) or 1400.0
+        return aspect, max(1.0 - PANEL_PX / width_px, 0.4), float(np.tan(cam.fov / 2))
+
+    def _panel_shift(self, height: float) -> np.ndarray:
+        """How far east to look so what is below the camera sits mid-way in the free part."""
+        aspect, free, half_h = self._view_geometry()
+        return np.array([height * half_h * aspect * (1.0 - free), 0.0, 0.0])
 
     # -- drawing --------------------------------------------------------------------------
 
@@ -542,7 +568,7 @@ class ClientView:
         xy, _ = data.proposed.pose_at(t + data.t0)
         cam = self.client.camera
         offset = np.asarray(cam.position) - np.asarray(cam.look_at)
-        target = np.array([xy[0], xy[1], 0.0])
+        target = np.array([xy[0], xy[1], 0.0]) + self._panel_shift(float(np.linalg.norm(offset)))
         cam.look_at = tuple(target)
         cam.position = tuple(target + offset)
 

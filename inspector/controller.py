@@ -351,7 +351,15 @@ def _default_run(
 ) -> Run:
     from estimator.runner import run
 
-    return run(inputs.log, inputs.route, params, method=method, progress=progress, reuse=reuse)
+    return run(
+        inputs.log,
+        inputs.route,
+        params,
+        method=method,  # type: ignore[arg-type]
+        frame=inputs.frame,
+        progress=progress,
+        reuse=reuse,
+    )
 
 
 class Controller:
