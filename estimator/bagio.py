@@ -29,6 +29,8 @@ from .errors import LogError
 from .log import GnssData, ImuData, Log, TopicInfo, TruthData, WheelData
 
 CACHE_VERSION = 1
+CACHE_MAX_BYTES = 2_000_000_000
+"""Least recently used cache entries are removed beyond this total size."""
 MIN_IMU_SAMPLES = 10
 
 IMU_TYPES = ("sensor_msgs/msg/Imu",)
@@ -639,6 +641,25 @@ def _save(target: Path, log: Log) -> None:
         with os.fdopen(fd, "wb") as fh:
             np.savez(fh, **_to_npz(log))
         os.replace(tmp, target)
+        _prune(target.parent, keep=target)
+
+
+def _prune(cache: Path, *, keep: Path, max_bytes: int | None = None) -> None:
+    """Remove the least recently used entries until the cache fits in ``max_bytes``."""
+    limit = CACHE_MAX_BYTES if max_bytes is None else max_bytes
+    entries = []
+    for p in cache.glob("log-*.npz"):
+        with contextlib.suppress(OSError):
+            st = p.stat()
+            entries.append((st.st_mtime, st.st_size, p))
+    total = sum(size for _, size, _ in entries)
+    for _, size, p in sorted(entries):
+        if total <= limit:
+            break
+        if p != keep:
+            with contextlib.suppress(OSError):
+                p.unlink()
+                total -= size
 
 
 # ---------------------------------------------------------------------------------------------
@@ -669,6 +690,8 @@ def load_log(
         try:
             with np.load(entry, allow_pickle=False) as data:
                 log = _from_npz(path, data)
+            with contextlib.suppress(OSError):
+                os.utime(entry)  # recently used: pruned last
             if progress is not None:
                 progress(1.0)
             return log

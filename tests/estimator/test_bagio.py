@@ -1,5 +1,6 @@
 from __future__ import annotations
 
+import os
 from pathlib import Path
 
 import numpy as np
@@ -392,3 +393,19 @@ def test_byte_layout_fast_path_matches_full_deserialisation(tmp_path: Path, monk
         x, y = getattr(fast, part), getattr(slow, part)
         for name in x.__dataclass_fields__:
             np.testing.assert_array_equal(getattr(x, name), getattr(y, name))
+
+
+def test_cache_keeps_to_its_size_limit(tmp_path: Path, monkeypatch) -> None:
+    imu, gnss, *_ = _streams()
+    cache = tmp_path / "cache"
+    paths = []
+    for i in range(3):
+        paths.append(tmp_path / f"log{i}.mcap")
+        write_bag(paths[-1], imu=ImuData(imu.t + i, imu.gyro, imu.accel), gnss=gnss)
+    load_log(paths[0], cache_dir=cache)
+    (entry,) = cache.glob("log-*.npz")
+    monkeypatch.setattr("estimator.bagio.CACHE_MAX_BYTES", int(2.5 * entry.stat().st_size))
+    load_log(paths[1], cache_dir=cache)
+    os.utime(entry, (1.0, 1.0))  # log0 is the least recently used
+    load_log(paths[2], cache_dir=cache)
+    assert len(list(cache.glob("log-*.npz"))) == 2 and not entry.exists()

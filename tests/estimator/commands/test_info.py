@@ -153,6 +153,15 @@ def test_every_shared_data_file(shared_data: Path, capsys) -> None:
             assert code == 2 and err.count("\n") == 1 and str(path) in err
 
 
+def test_every_sample_log() -> None:
+    sample_logs = Path(__file__).resolve().parents[3] / "sample_logs"
+    files = sorted(p for p in sample_logs.glob("*") if p.suffix in (".mcap", ".bag", ".geojson"))
+    if not files:
+        pytest.skip(f"no sample logs in {sample_logs}")
+    for path in files:
+        assert main(["info", str(path)]) == 0, path
+
+
 def test_real_husky_bag(shared_data: Path, capsys) -> None:
     code, out, _ = _run(capsys, shared_data / "robot_localization" / "test1.bag")
     assert code == 0
