@@ -10,9 +10,10 @@ from pathlib import Path
 import numpy as np
 from numpy.typing import NDArray
 
-from ..bagio import TopicChoice
+from ..bagio import TopicChoice, load_log
+from ..errors import LogError
 from ..geo import LocalFrame
-from ..inputs import Inputs, open_inputs, route_distances
+from ..inputs import Inputs, frame_of, open_inputs, route_distances
 from ..log import Log
 from ..routeio import SUFFIXES, read_route_lines, route_in_frame
 from ._common import add_topic_options
@@ -87,9 +88,8 @@ def _path_length(xy: NDArray[np.float64]) -> float:
     return float(np.sum(np.hypot(*np.diff(xy, axis=0).T))) if len(xy) > 1 else 0.0
 
 
-def distances_travelled(inputs: Inputs) -> tuple[tuple[str, float], ...]:
-    """Distance travelled by every source the log has, each named."""
-    log, frame = inputs.log, inputs.frame
+def distances_travelled(log: Log, frame: LocalFrame | None) -> tuple[tuple[str, float], ...]:
+    """Distance travelled by every source the log has, each named (positions need a frame)."""
     out: list[tuple[str, float]] = []
     if log.wheel is not None and len(log.wheel.t) > 1:
         w = log.wheel
@@ -100,20 +100,25 @@ def distances_travelled(inputs: Inputs) -> tuple[tuple[str, float], ...]:
             )
         )
     ok = log.gnss.valid
-    if np.count_nonzero(ok) > SMOOTHING_FIXES:
+    if frame is not None and np.count_nonzero(ok) > SMOOTHING_FIXES:
         enu = frame.to_enu(log.gnss.lat[ok], log.gnss.lon[ok], log.gnss.alt[ok])[:, :2]
         kernel = np.ones(SMOOTHING_FIXES) / SMOOTHING_FIXES
         smooth = np.column_stack([np.convolve(enu[:, i], kernel, "valid") for i in range(2)])
         out.append((f"GNSS fixes, {SMOOTHING_FIXES}-fix moving average", _path_length(smooth)))
-    if log.truth is not None:
+    if frame is not None and log.truth is not None:
         tr = log.truth
         enu = frame.to_enu(tr.lat, tr.lon, tr.alt)[:, :2]
         out.append(("ground truth", _path_length(enu[np.all(np.isfinite(enu), axis=1)])))
     return tuple(out)
 
 
-def summarize(inputs: Inputs) -> LogSummary:
-    log = inputs.log
+def summarize(inputs: Inputs | Log) -> LogSummary:
+    """What ``routefuse info`` prints; a bare Log (no position to place a frame at) gets
+    neither GNSS nor truth distances."""
+    if isinstance(inputs, Log):
+        log, frame, route = inputs, None, None
+    else:
+        log, frame, route = inputs.log, inputs.frame, inputs.route
     streams = {"imu": log.imu.t, "gnss": log.gnss.t}
     if log.wheel is not None:
         streams["wheel"] = log.wheel.t
@@ -130,9 +135,9 @@ def summarize(inputs: Inputs) -> LogSummary:
         lines.append(TopicLine(info.topic, info.msgtype, info.count, rate, info.role, measured))
     outages, thr = gnss_outages(log)
     route_summary = None
-    if inputs.route is not None:
-        r = inputs.route
-        d = route_distances(log, r, inputs.frame)
+    if route is not None and frame is not None:
+        r = route
+        d = route_distances(log, r, frame)
         stats = (np.median(d), np.percentile(d, 95), d.max()) if len(d) else (np.nan,) * 3
         route_summary = RouteSummary(
             r.source, r.name, r.length, len(r.xy), *(float(v) for v in stats)
@@ -146,7 +151,7 @@ def summarize(inputs: Inputs) -> LogSummary:
         gnss_valid=int(np.count_nonzero(log.gnss.valid)),
         outages=outages,
         outage_threshold_s=thr,
-        distances=distances_travelled(inputs),
+        distances=distances_travelled(log, frame),
         warnings=log.warnings,
         route=route_summary,
     )
@@ -238,10 +243,20 @@ def execute(args: argparse.Namespace) -> int:
     if Path(args.log).suffix.lower() in SUFFIXES and args.route is None:
         print(format_route_file(Path(args.log)))
         return 0
+    topics = TopicChoice.from_args(args)
+    if args.route is None:
+        log = load_log(Path(args.log), topics=topics)
+        try:
+            frame = frame_of(log)
+        except LogError:
+            print(format_summary(summarize(log)))
+            return 0
+        print(format_summary(summarize(Inputs(log, None, frame))))
+        return 0
     inputs = open_inputs(
         Path(args.log),
         None if args.route is None else Path(args.route),
-        topics=TopicChoice.from_args(args),
+        topics=topics,
         route_feature=args.route_feature,
     )
     print(format_summary(summarize(inputs)))

@@ -55,6 +55,24 @@ def test_outages_distances_and_rates(tmp_path: Path, capsys) -> None:
     assert rows["/wheel/odom"] == ["nav_msgs/msg/Odometry", "1200", "20.0", "Hz", "wheel"]
 
 
+def test_log_without_any_fix(tmp_path: Path, capsys) -> None:
+    path = tmp_path / "dark.mcap"
+    t = T0 + 0.1 * np.arange(100)
+    nan = np.full(100, np.nan)
+    write_bag(
+        path,
+        imu=ImuData(t, np.zeros((100, 3)), np.zeros((100, 3))),
+        gnss=GnssData(t, nan, nan, nan, np.full(100, -1, np.int8), np.ones((100, 3))),
+        wheel=WheelData(t, np.full(100, 2.0)),
+    )
+    code, out, _ = _run(capsys, path)
+    assert code == 0
+    assert "GNSS      0 valid of 100 fixes" in out
+    assert "outages   1 without a valid fix for more than 1.0 s: 0.0-9.9 s (9.9 s)" in out
+    assert "distance  19.8 m from wheel-speed integral" in out
+    assert "note      GNSS /gnss/fix: no valid fix in the whole log" in out
+
+
 def test_topic_options_and_unused_topics(tmp_path: Path, capsys) -> None:
     path = _outage_log(
         tmp_path / "drive.bag",
