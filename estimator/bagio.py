@@ -89,6 +89,8 @@ def _bag_paths(path: Path) -> Path:
     suffix = path.suffix.lower()
     if suffix in (".db3", ".mcap") and (path.parent / "metadata.yaml").is_file():
         return path.parent
+    if suffix == ".db3":
+        raise LogError(path, "a .db3 file is read with its bag folder (metadata.yaml is missing)")
     if suffix not in (".bag", ".mcap"):
         raise LogError(
             path,
@@ -174,6 +176,7 @@ def _pick(
     chosen: str | None,
     truth: bool,
     required: bool,
+    taken: frozenset[str] = frozenset(),
 ) -> str | None:
     if chosen is not None:
         if chosen not in types:
@@ -184,7 +187,11 @@ def _pick(
                 f"--{kind}-topic {chosen} is a {types[chosen]}, expected " + " or ".join(accepted),
             )
         return chosen
-    found = sorted(t for t, m in types.items() if m in accepted and is_truth_topic(t) == truth)
+    found = sorted(
+        t
+        for t, m in types.items()
+        if m in accepted and is_truth_topic(t) == truth and t not in taken
+    )
     if len(found) == 1:
         return found[0]
     if not found:
@@ -200,30 +207,25 @@ def _pick(
 
 
 def _roles(path: Path, types: dict[str, str], choice: TopicChoice) -> _Roles:
-    imu = _pick(
-        path, types, kind="imu", accepted=IMU_TYPES, chosen=choice.imu, truth=False, required=True
-    )
-    gnss = _pick(
-        path, types, kind="gnss", accepted=FIX_TYPES, chosen=choice.gnss, truth=False, required=True
-    )
-    wheel = _pick(
-        path,
-        types,
-        kind="wheel",
-        accepted=WHEEL_TYPES,
-        chosen=choice.wheel,
-        truth=False,
-        required=False,
-    )
-    truth = _pick(
-        path,
-        types,
-        kind="truth",
-        accepted=FIX_TYPES,
-        chosen=choice.truth,
-        truth=True,
-        required=False,
-    )
+    """Chosen topics first; a topic the user chose for one role is no candidate for another."""
+    taken = frozenset(t for t in (choice.imu, choice.gnss, choice.wheel, choice.truth) if t)
+
+    def pick(kind: str, accepted: tuple[str, ...], *, truth: bool = False) -> str | None:
+        return _pick(
+            path,
+            types,
+            kind=kind,
+            accepted=accepted,
+            chosen=getattr(choice, kind),
+            truth=truth,
+            required=kind in ("imu", "gnss"),
+            taken=taken,
+        )
+
+    imu = pick("imu", IMU_TYPES)
+    gnss = pick("gnss", FIX_TYPES)
+    wheel = pick("wheel", WHEEL_TYPES)
+    truth = pick("truth", FIX_TYPES, truth=True)
     poses = sorted(t for t, m in types.items() if m == ODOM_TYPE and is_truth_topic(t))
     truth_pose = poses[0] if truth is not None and len(poses) == 1 else None
     tf = next((t for t, m in types.items() if m == TF_TYPE and t.endswith("tf_static")), None)

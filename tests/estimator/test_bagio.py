@@ -152,6 +152,12 @@ def test_topics_are_found_by_type_and_chosen_by_name(tmp_path: Path) -> None:
     }
     assert log.wheel is not None
     np.testing.assert_array_equal(log.wheel.speed, wheel.speed)
+    # a topic chosen for one role is no candidate for another
+    log = load_log(
+        merged, cache_dir=tmp_path / "c", topics=TopicChoice(imu="/imu/raw", truth="/gnss/fix")
+    )
+    assert {t.topic: t.role for t in log.topics}["/gps/fix"] == "gnss"
+    assert log.truth is not None and len(log.truth.t) == len(gnss.t)
     with pytest.raises(LogError, match=r"no topic /nope \(--imu-topic\); topics: /gnss/fix"):
         load_log(merged, cache_dir=tmp_path / "c", topics=TopicChoice(imu="/nope"))
     with pytest.raises(LogError, match="--gnss-topic /imu/raw is a sensor_msgs/msg/Imu"):
