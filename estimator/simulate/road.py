@@ -101,56 +101,78 @@ def scale_pieces(pieces: Sequence[Piece], scale: float) -> tuple[Piece, ...]:
 class CosineSteps:
     """``base`` plus a sum of raised-cosine steps: C1, with closed-form derivative and integral.
 
-    Step ``j`` rises by ``delta[j]`` over ``[start[j], start[j] + length[j]]``.
+    Step ``j`` rises by ``delta[j]`` over ``[start[j], start[j] + length[j]]``. Evaluation is
+    O(N log M): finished steps come from prefix sums, only the few active ones are summed.
     """
 
     base: float
     start: F64
     length: F64
     delta: F64
+    _order: F64 = field(init=False, repr=False, compare=False)
 
-    def _phase(self, x: F64) -> F64:
-        return np.clip((x[:, None] - self.start) / self.length, 0.0, 1.0)
+    def __post_init__(self) -> None:
+        order = np.argsort(self.start, kind="stable")
+        start, length, delta = self.start[order], self.length[order], self.delta[order]
+        end = start + length
+        by_end = np.argsort(end, kind="stable")
+        object.__setattr__(self, "_order", order)
+        object.__setattr__(self, "_s", start)
+        object.__setattr__(self, "_l", length)
+        object.__setattr__(self, "_d", delta)
+        object.__setattr__(self, "_e", end)
+        object.__setattr__(self, "_end_sorted", end[by_end])
+        object.__setattr__(self, "_cum_d", np.r_[0.0, np.cumsum(delta[by_end])])
+        mid = (start + 0.5 * length)[by_end]
+        object.__setattr__(self, "_cum_dm", np.r_[0.0, np.cumsum(delta[by_end] * mid)])
+        lmax = float(length.max()) if len(length) else 0.0
+        object.__setattr__(self, "_lmax", lmax)
+        if len(start):
+            lo = np.searchsorted(start, start - lmax, side="left")
+            width = int(np.max(np.arange(len(start)) - lo)) + 1
+        else:
+            width = 0
+        object.__setattr__(self, "_width", width)
+
+    def _eval(self, x: F64, kind: str) -> F64:
+        """Sum over steps of delta times (ramp value | slope | antiderivative) at x."""
+        out = np.zeros(len(x))
+        if not len(self._d):
+            return out
+        done = np.searchsorted(self._end_sorted, x, side="right")
+        if kind == "value":
+            out += self._cum_d[done]
+        elif kind == "integral":
+            out += x * self._cum_d[done] - self._cum_dm[done]
+        hi = np.searchsorted(self._s, x, side="left")
+        lo = np.searchsorted(self._s, x - self._lmax, side="left")
+        for o in range(self._width):
+            j = np.minimum(lo + o, len(self._s) - 1)
+            act = (lo + o < hi) & (x > self._s[j]) & (x < self._e[j])
+            if not act.any():
+                continue
+            length = self._l[j]
+            u = np.where(act, (x - self._s[j]) / length, 0.0)
+            if kind == "value":
+                r = 0.5 - 0.5 * np.cos(np.pi * u)
+            elif kind == "derivative":
+                r = 0.5 * np.pi * np.sin(np.pi * u) / length
+            else:
+                r = 0.5 * u * length - length / (2 * np.pi) * np.sin(np.pi * u)
+            out += np.where(act, self._d[j] * r, 0.0)
+        return out
 
     def value(self, x: ArrayLike) -> F64:
         xa = np.atleast_1d(np.asarray(x, np.float64))
-        if not len(self.delta):
-            return np.full(len(xa), self.base)
-        u = self._phase(xa)
-        return self.base + (0.5 - 0.5 * np.cos(np.pi * u)) @ self.delta
+        return self.base + self._eval(xa, "value")
 
     def derivative(self, x: ArrayLike) -> F64:
-        xa = np.atleast_1d(np.asarray(x, np.float64))
-        if not len(self.delta):
-            return np.zeros(len(xa))
-        u = self._phase(xa)
-        inside = (u > 0.0) & (u < 1.0)
-        d = np.where(inside, 0.5 * np.pi * np.sin(np.pi * u) / self.length, 0.0)
-        return d @ self.delta
+        return self._eval(np.atleast_1d(np.asarray(x, np.float64)), "derivative")
 
     def integral(self, x: ArrayLike) -> F64:
         """Integral from 0 to x."""
         xa = np.atleast_1d(np.asarray(x, np.float64))
-        out = self.base * xa
-        if not len(self.delta):
-            return out
-        u = self._phase(xa)
-        rel = xa[:, None] - self.start
-        ramp = np.where(
-            u >= 1.0,
-            rel - 0.5 * self.length,
-            0.5 * u * self.length - self.length / (2 * np.pi) * np.sin(np.pi * u),
-        )
-        ramp = np.where(u <= 0.0, 0.0, ramp)
-        # steps that begin before 0 contribute their integral from 0, not from their start
-        at0 = np.clip(-self.start / self.length, 0.0, 1.0)
-        ramp0 = np.where(
-            at0 >= 1.0,
-            -self.start - 0.5 * self.length,
-            0.5 * at0 * self.length - self.length / (2 * np.pi) * np.sin(np.pi * at0),
-        )
-        ramp0 = np.where(at0 <= 0.0, 0.0, ramp0)
-        return out + (ramp - ramp0) @ self.delta
+        return self.base * xa + self._eval(xa, "integral") - self._eval(np.zeros(1), "integral")
 
 
 def _steps(pieces: Sequence[Piece], attr: str, s0: F64, default: float, ramp_len) -> CosineSteps:

@@ -20,6 +20,7 @@ from .monaco import ATTRIBUTION, LONLAT, TUNNEL_END_VERTEX, TUNNEL_START_VERTEX
 from .road import Piece, Road, pieces_from_polyline, straight, turn
 from .scenario import Scenario
 from .sdmap import RouteModel, map_route
+from .trajectory import Trajectory
 
 
 def _open_sky_warmup(speed: float) -> tuple[Piece, ...]:
@@ -215,7 +216,7 @@ def long_drive(minutes: float, *, seed: int = 0) -> Scenario:
     pieces: list[Piece] = list(_open_sky_warmup(20.0))
     t = 90.0
     next_tunnel = 180.0
-    while t < target:
+    while t < 1.2 * target + 120.0:
         speed = float(rng.uniform(12.0, 30.0))
         grade = float(np.round(rng.uniform(-0.04, 0.04), 3))
         if t >= next_tunnel:
@@ -231,7 +232,17 @@ def long_drive(minutes: float, *, seed: int = 0) -> Scenario:
         angle = float(rng.uniform(15.0, 110.0)) * float(rng.choice([-1.0, 1.0]))
         pieces += turn(angle, radius)
         t += (length + abs(np.radians(angle)) * radius) / speed
-    pieces += straight(300.0, speed_m_s=20.0, grade=0.0)
+    # cut at the last open straight that ends before the target time, then a final straight
+    road = Road(tuple(pieces))
+    traj = Trajectory(road)
+    ends = traj.time_at(road._s0[1:])
+    cut = max(
+        i
+        for i, p in enumerate(pieces)
+        if p.curvature_start == p.curvature_end == 0.0 and not p.tunnel and ends[i] <= target - 20.0
+    )
+    final = max(300.0, (target - float(ends[cut])) * 20.0)
+    pieces = [*pieces[: cut + 1], *straight(final, speed_m_s=20.0, grade=0.0)]
     return Scenario(
         name=f"long_drive_{minutes:g}min",
         description=f"about {minutes:g} minutes of random road with tunnels (benchmarks)",
