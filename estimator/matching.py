@@ -299,6 +299,28 @@ def _scan_kernel(
         ms[k] = max(saa + sbb - 2.0 * tr, 0.0) / sw
 
 
+@njit(cache=True)
+def _nearest_s(rxy: F64, rs: F64, x: float, y: float) -> float:
+    """Arc length of the point of a polyline nearest to (x, y) (small local pieces)."""
+    best, best_s = np.inf, 0.0
+    for j in range(rxy.shape[0] - 1):
+        dx = rxy[j + 1, 0] - rxy[j, 0]
+        dy = rxy[j + 1, 1] - rxy[j, 1]
+        seg = rs[j + 1] - rs[j]
+        f = ((x - rxy[j, 0]) * dx + (y - rxy[j, 1]) * dy) / (seg * seg)
+        f = min(max(f, 0.0), 1.0)
+        ex = rxy[j, 0] + f * dx - x
+        ey = rxy[j, 1] + f * dy - y
+        d = ex * ex + ey * ey
+        if d < best:
+            best, best_s = d, rs[j] + f * seg
+    return best_s
+
+
+def _anchor(piece: Route, point: F64) -> float:
+    return float(_nearest_s(piece.xy, piece.s, float(point[0]), float(point[1])))
+
+
 def _scan(win: F64, route: Route, s_anchor: float, deltas: F64, spacing: float) -> tuple[F64, F64]:
     """Mean squared residual and number of valid pairs at each arc-length offset."""
     ms = np.empty(len(deltas))
@@ -501,7 +523,7 @@ def _rivals(
         if piece is None:
             out[name] = None
             continue
-        out[name] = _fit(win, p_dr, piece, float(piece.project(win[0]).s[0]), z_lane, params)
+        out[name] = _fit(win, p_dr, piece, _anchor(piece, win[0]), z_lane, params)
     return out
 
 
@@ -559,7 +581,7 @@ def match_window(
     fit = None
     if cand is not None and len(win) >= 2:
         if lane_path:
-            fit = _fit(win, p, cand, float(cand.project(win[0]).s[0]), 0.0, params)
+            fit = _fit(win, p, cand, _anchor(cand, win[0]), 0.0, params)
         else:
             fit = _fit(win, p, cand, s_anchor, lane, params)
     nan2 = np.full(2, np.nan)
