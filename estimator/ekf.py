@@ -3,11 +3,17 @@
 Everything the filter carries is a plain float64 array, so a run can stop at any IMU sample, be
 copied (a checkpoint) and resume bit-identically:
 
-- ``x`` (17): nominal state: position ENU (m), velocity ENU (m/s), attitude quaternion body->ENU
-  (w, x, y, z), gyro bias (rad/s), accelerometer bias (m/s^2), wheel-speed scale factor.
-- ``P`` (16, 16): covariance of the error state: attitude (a rotation of the ENU frame, rad),
-  velocity, position, gyro bias, accelerometer bias, wheel scale. Errors are ``true - estimate``
-  and the true attitude is ``(I + [phi x]) C_est``.
+- ``x`` (20): nominal state: position ENU (m), velocity ENU (m/s), attitude quaternion body->ENU
+  (w, x, y, z), gyro bias (rad/s), accelerometer bias (m/s^2), wheel-speed scale factor, GNSS
+  wander (m, ENU).
+- ``P`` (19, 19): covariance of the error state: attitude (a rotation of the ENU frame, rad),
+  velocity, position, gyro bias, accelerometer bias, wheel scale, GNSS wander. Errors are
+  ``true - estimate`` and the true attitude is ``(I + [phi x]) C_est``.
+
+The GNSS wander is the slowly varying part of a receiver's error (first-order Gauss-Markov, tens
+of seconds): modelled as a state, the filter keeps an honest absolute position variance while
+still learning heading and speed from how consecutive fixes move. Treating correlated fixes as
+independent makes the position covariance shrink far below the real error.
 - ``aux``: the filter's bookkeeping (time, pending covariance propagation, the DR track, the
   previous IMU sample, counters); ``idx``: next IMU / wheel / GNSS sample and output row.
 
@@ -27,9 +33,9 @@ import numpy as np
 from numba import njit
 
 # nominal state
-X_POS, X_VEL, X_QUAT, X_BG, X_BA, X_SCALE, NX = 0, 3, 6, 10, 13, 16, 17
+X_POS, X_VEL, X_QUAT, X_BG, X_BA, X_SCALE, X_GW, NX = 0, 3, 6, 10, 13, 16, 17, 20
 # error state
-E_ATT, E_VEL, E_POS, E_BG, E_BA, E_SCALE, NE = 0, 3, 6, 9, 12, 15, 16
+E_ATT, E_VEL, E_POS, E_BG, E_BA, E_SCALE, E_GW, NE = 0, 3, 6, 9, 12, 15, 16, 19
 
 # aux: bookkeeping
 A_TIME = 0  # time of the state: the last IMU sample processed
@@ -79,7 +85,10 @@ C_AID_DT = 19
 C_SCALE_ON = 20
 C_RESET_S = 21
 C_WHEEL_GAP = 22  # wheel samples further apart than this are not interpolated
-NC = 24
+C_TAU_W = 23  # GNSS wander correlation time
+C_QW_H = 24  # GNSS wander driving PSD, horizontal
+C_QW_V = 25
+NC = 26
 
 # output rows
 O_T = 0
@@ -178,9 +187,9 @@ def dcm_to_euler(C: np.ndarray) -> tuple[float, float, float]:
 
 
 @njit(cache=True)
-def _f_times(M, Cb, fn, w, inv_tau_g, inv_tau_a, out):
-    """out = F M for the 16x16 error-state F, using its block sparsity (~50 products per
-    column instead of 256)."""
+def _f_times(M, Cb, fn, w, inv_tau_g, inv_tau_a, inv_tau_w, out):
+    """out = F M for the error-state F, using its block sparsity (~50 products per column
+    instead of 361)."""
     for c in range(NE):
         a0, a1, a2 = M[0, c], M[1, c], M[2, c]
         v0, v1, v2 = M[3, c], M[4, c], M[5, c]
@@ -216,29 +225,34 @@ def _f_times(M, Cb, fn, w, inv_tau_g, inv_tau_a, out):
         out[13, c] = -inv_tau_a * b1
         out[14, c] = -inv_tau_a * b2
         out[15, c] = 0.0
+        out[16, c] = -inv_tau_w * M[16, c]
+        out[17, c] = -inv_tau_w * M[17, c]
+        out[18, c] = -inv_tau_w * M[18, c]
 
 
 @njit(cache=True)
 def flush_covariance(P: np.ndarray, aux: np.ndarray, cfg: np.ndarray) -> None:
     """P <- Phi P Phi^T + Q over the time accumulated since the last call, with
     Phi = I + F T and F built from the interval's mean attitude and specific force."""
+    _flush(P, aux, cfg, np.empty((NE, NE)), np.empty((NE, NE)), np.empty((3, 3)), np.empty(3))
+
+
+@njit(cache=True)
+def _flush(P, aux, cfg, A, B, Cb, fn):
     T = aux[A_COV_T]
     if T <= 0.0:
         return
-    Cb = np.empty((3, 3))
     for i in range(3):
         for j in range(3):
             Cb[i, j] = aux[A_COV_C + 3 * i + j] / T
-    fn = np.empty(3)
     for i in range(3):
         fn[i] = aux[A_COV_F + i] / T
     w = cfg[C_WIE : C_WIE + 3]
     itg = 1.0 / cfg[C_TAU_G]
     ita = 1.0 / cfg[C_TAU_A]
-    A = np.empty((NE, NE))
-    B = np.empty((NE, NE))
-    _f_times(P, Cb, fn, w, itg, ita, A)  # A = F P
-    _f_times(A.T, Cb, fn, w, itg, ita, B)  # B = F P F^T
+    itw = 1.0 / cfg[C_TAU_W]
+    _f_times(P, Cb, fn, w, itg, ita, itw, A)  # A = F P
+    _f_times(A.T, Cb, fn, w, itg, ita, itw, B)  # B = F P F^T
     TT = T * T
     for i in range(NE):
         for j in range(i, NE):
@@ -250,6 +264,7 @@ def flush_covariance(P: np.ndarray, aux: np.ndarray, cfg: np.ndarray) -> None:
         P[E_VEL + i, E_VEL + i] += cfg[C_VRW2] * T
         P[E_BG + i, E_BG + i] += cfg[C_QBG] * T
         P[E_BA + i, E_BA + i] += cfg[C_QBA] * T
+        P[E_GW + i, E_GW + i] += (cfg[C_QW_H] if i < 2 else cfg[C_QW_V]) * T
     aux[A_COV_T] = 0.0
     for i in range(12):
         aux[A_COV_C + i] = 0.0
@@ -324,6 +339,12 @@ def _apply_update(x, P, y, m, PHt, Si, scale_on):
     """x <- x (+) K y, P <- P - K H P, with K = P H^T S^-1 (the error state is injected into
     the nominal state at once, so it is zero between updates)."""
     K = np.empty((NE, 3))
+    dx = np.empty(NE)
+    _apply(x, P, y, m, PHt, Si, scale_on, K, dx)
+
+
+@njit(cache=True)
+def _apply(x, P, y, m, PHt, Si, scale_on, K, dx):
     for i in range(NE):
         for a in range(m):
             acc = 0.0
@@ -338,7 +359,6 @@ def _apply_update(x, P, y, m, PHt, Si, scale_on):
             v = P[i, j] - acc
             P[i, j] = v
             P[j, i] = v
-    dx = np.zeros(NE)
     for i in range(NE):
         acc = 0.0
         for a in range(m):
@@ -358,6 +378,8 @@ def inject(x: np.ndarray, dx: np.ndarray) -> None:
         x[X_BG + i] += dx[E_BG + i]
         x[X_BA + i] += dx[E_BA + i]
     x[X_SCALE] += dx[E_SCALE]
+    for i in range(3):
+        x[X_GW + i] += dx[E_GW + i]
     d = _rotvec_quat(dx[0], dx[1], dx[2])
     q = _qmul(d[0], d[1], d[2], d[3], x[X_QUAT], x[X_QUAT + 1], x[X_QUAT + 2], x[X_QUAT + 3])
     _set_quat(x, q[0], q[1], q[2], q[3])
@@ -466,8 +488,9 @@ def _gnss_update(x, P, aux, cfg, t, t_fix, pos, var, C, H, y, R, PHt, S, Si):
         for b in range(3):
             R[a, b] = 0.0
         H[a, E_POS + a] = 1.0
+        H[a, E_GW + a] = 1.0
         R[a, a] = var[a]
-        y[a] = pos[a] - (x[X_POS + a] - x[X_VEL + a] * dtf + la[a])
+        y[a] = pos[a] - (x[X_POS + a] - x[X_VEL + a] * dtf + la[a] + x[X_GW + a])
     # d(C l)/dphi = -[C l x]
     H[0, 1] = la[2]
     H[0, 2] = -la[1]
@@ -615,8 +638,13 @@ def run_until(
     PHt = np.empty((NE, 3))
     S = np.empty((3, 3))
     Si = np.empty((3, 3))
+    FA = np.empty((NE, NE))
+    FB = np.empty((NE, NE))
+    FC = np.empty((3, 3))
+    FF = np.empty(3)
     w = cfg[C_WIE : C_WIE + 3]
     grav = cfg[C_GRAVITY]
+    itw = 1.0 / cfg[C_TAU_W]
     while idx[I_IMU] < n:
         k = idx[I_IMU]
         t = imu_t[k]
@@ -655,6 +683,10 @@ def run_until(
         qn = _qmul(q0, q1, q2, q3, b[0], b[1], b[2], b[3])
         qn = _qmul(ee[0], ee[1], ee[2], ee[3], qn[0], qn[1], qn[2], qn[3])
         _set_quat(x, qn[0], qn[1], qn[2], qn[3])
+        decay = 1.0 - dt * itw
+        x[X_GW] *= decay
+        x[X_GW + 1] *= decay
+        x[X_GW + 2] *= decay
         de = 0.5 * (v0 + n0) * dt
         dn = 0.5 * (v1 + n1) * dt
         aux[A_DR] += de
@@ -669,7 +701,7 @@ def run_until(
         aux[A_COV_F + 1] += fn1 * dt
         aux[A_COV_F + 2] += fn2 * dt
         if aux[A_COV_T] >= cfg[C_COV_DT]:
-            flush_covariance(P, aux, cfg)
+            _flush(P, aux, cfg, FA, FB, FC, FF)
         aux[A_TIME] = t
         aux[A_PREV_GYRO], aux[A_PREV_GYRO + 1], aux[A_PREV_GYRO + 2] = (
             gyro[k, 0],
@@ -694,7 +726,7 @@ def run_until(
                 aux[A_GYRO_SUM + i] = 0.0
         if t - aux[A_LAST_AID] >= cfg[C_AID_DT] - 1e-9:
             aux[A_LAST_AID] = t
-            flush_covariance(P, aux, cfg)
+            _flush(P, aux, cfg, FA, FB, FC, FF)
             if still[k]:
                 _zupt_update(x, P, aux, cfg, H, y, R, PHt, S, Si)
                 aux[A_N_ZUPT] += 1
@@ -717,7 +749,7 @@ def run_until(
         while idx[I_GNSS] < ng and gnss_t[idx[I_GNSS]] <= t:
             g = idx[I_GNSS]
             idx[I_GNSS] += 1
-            flush_covariance(P, aux, cfg)
+            _flush(P, aux, cfg, FA, FB, FC, FF)
             used = _gnss_update(
                 x, P, aux, cfg, t, gnss_t[g], gnss_pos[g], gnss_var[g], C, H, y, R, PHt, S, Si
             )

@@ -196,6 +196,11 @@ class NoiseParams:
     gnss_reset_after_s: float = param(
         5.0, "after fixes have been rejected this long in a row, the position covariance is "
         "widened so GNSS is trusted again", unit="s", lo=0.5, hi=600, step=0.5)
+    gnss_wander_fraction: float = param(
+        0.8, "fraction of the typical fix variance that wanders slowly (a Gauss-Markov state "
+        "of the filter); the rest of each fix's variance is white", lo=0, hi=0.99, step=0.05)
+    gnss_wander_tau_s: float = param(
+        60.0, "correlation time of the GNSS wander", unit="s", lo=1, hi=3600, step=5)
     wheel_scale_sigma: float = param(
         0.01, "initial 1-sigma of the wheel-speed scale factor error", lo=0, hi=0.2,
         step=0.001)

@@ -279,9 +279,22 @@ def _prepare(
 
     still = _stationary(imu_t, gyro, accel, wheel_t, wheel_v, p)
     cfg = _config(p, frame, wheel_t)
+    # the wander follows the log's typical fix; each fix keeps the rest as white noise
+    wander = n.gnss_wander_fraction * np.median(gnss_var, axis=0)
+    wander[:2] = wander[:2].mean()
+    gnss_var = np.ascontiguousarray(np.maximum(gnss_var - wander, [h_floor, h_floor, 4 * h_floor]))
+    cfg[ekf.C_TAU_W] = n.gnss_wander_tau_s
+    cfg[ekf.C_QW_H] = 2 * wander[0] / n.gnss_wander_tau_s
+    cfg[ekf.C_QW_V] = 2 * wander[2] / n.gnss_wander_tau_s
     x0, P0, k0, t_fix = _align(
         src, imu_t, gyro, accel, still, wheel_t, wheel_v, gnss_t, gnss_pos, gnss_var, p, cfg
     )
+    # the aligning fix measures position + wander: their errors start anti-correlated
+    for i in range(3):
+        a, b = ekf.E_POS + i, ekf.E_GW + i
+        P0[a, a] += wander[i]
+        P0[b, b] = wander[i]
+        P0[a, b] = P0[b, a] = -wander[i]
     aux0 = np.zeros(ekf.NA)
     t_init = float(imu_t[k0])
     aux0[ekf.A_TIME] = t_init
