@@ -349,6 +349,24 @@ def _pairs(
     return s, valid, q, rot[0], trans[0], float(np.sqrt(ms[0]))
 
 
+def _unit_interval(x: F64, chi: F64, k: int) -> tuple[float, float] | None:
+    """Where ``chi`` first rises above 1 on each side of its minimum at ``k`` (linearly
+    interpolated); None when it never does inside the grid."""
+    ends = []
+    for direction in (-1, 1):
+        i = k
+        while True:
+            j = i + direction
+            if j < 0 or j >= len(x) or not np.isfinite(chi[j]):
+                return None
+            if chi[j] > 1.0:
+                f = (1.0 - chi[i]) / (chi[j] - chi[i])
+                ends.append(float(x[i] + f * (x[j] - x[i])))
+                break
+            i = j
+    return ends[0], ends[1]
+
+
 def _fit(
     win: F64,
     p_dr: F64,
@@ -377,14 +395,22 @@ def _fit(
     if 0 < k < len(deltas) - 1 and np.all(np.isfinite(ms[k - 1 : k + 2])):
         jm, j0, jp = ms[k - 1], ms[k], ms[k + 1]
         curvature = float((jm - 2.0 * j0 + jp) / step**2)
-        if curvature > 0:
-            if ext.along_track_search:
-                offset = float(deltas[k] + 0.5 * step * (jm - jp) / (jm - 2.0 * j0 + jp))
-            noise2 = max(float(j0) / 2.0, po.shape_noise_m**2)
+        noise2 = max(float(j0) / 2.0, po.shape_noise_m**2)
+        if ext.along_track_search:
+            # likelihood interval: offsets whose chi-square rise stays within 1; robust to the
+            # ripples a vertexed map leaves on a residual that is flat on a constant bend
+            chi = max(m[k], 1.0) * (ms - j0) / noise2
+            bounds = _unit_interval(deltas, chi, k)
+            if bounds is not None:
+                sigma = 0.5 * (bounds[1] - bounds[0])
+                if curvature > 0:
+                    offset = float(deltas[k] + 0.5 * step * (jm - jp) / (jm - 2.0 * j0 + jp))
+                offset = float(np.clip(offset if curvature > 0 else deltas[k], *bounds))
+        elif curvature > 0:
             sigma = float(np.sqrt(2.0 * noise2 / (max(m[k], 1.0) * curvature)))
     observed = sigma < po.along_sigma_max_m
-    if ext.along_track_search and (not observed or sigma > half / 2 or abs(offset) > half):
-        offset, observed = 0.0, False
+    if not observed:
+        offset = 0.0
     sigma = float(max(sigma, po.along_sigma_min_m)) if observed else po.along_sigma_max_m
 
     s, valid, q, rot, trans, residual = _pairs(win, route, s_anchor + offset, h)

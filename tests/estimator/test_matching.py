@@ -386,6 +386,19 @@ def test_along_track_is_unobserved_on_a_straight_road():
     assert rec.innovation[0] == pytest.approx(0.0, abs=1e-6)
 
 
+def test_along_track_is_unobserved_on_a_constant_bend():
+    """Sliding along a circle is a rotation, which the rigid fit absorbs: a steady curve tells
+    no more about along-track position than a straight road."""
+    a = np.radians(np.arange(0.0, 240.0, 2.0))
+    route = Route(330.0 * np.column_stack([np.sin(a), 1.0 - np.cos(a)]))
+    path = driven(route, 900.0)
+    rec = match(path + 10.0 * route.tangent_at(900.0)[0], route, cov=400.0)
+    assert rec.accepted
+    assert rec.extra["along_observed"] == 0.0
+    assert rec.extra["along_offset_m"] == 0.0
+    assert rec.extra["along_sigma_m"] == Params().pseudo.along_sigma_max_m
+
+
 def test_geometry_covariance_rotates_with_the_road():
     route = Route(straight().xy @ rot(30).T)
     path = driven(route, 600.0)
