@@ -194,6 +194,13 @@ class TrackLayer(Layer):
         self._show("line", track is not None)
         self._show("pose", track is not None)
 
+    def set_pose_scale(self, scale: float) -> None:
+        """Enlarge the vehicle marker: seen from high above a whole drive, a car-sized marker
+        is a dot (the export's overview replay)."""
+        h = self._handles.get("pose")
+        if h is not None:
+            h.scale = float(scale)  # type: ignore[attr-defined]
+
     def draw(self, data: SceneData, t: float) -> None:
         track = self._track(data)
         if track is None:
