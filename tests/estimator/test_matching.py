@@ -392,7 +392,7 @@ def test_along_track_is_unobserved_on_a_constant_bend():
     a = np.radians(np.arange(0.0, 240.0, 2.0))
     route = Route(330.0 * np.column_stack([np.sin(a), 1.0 - np.cos(a)]))
     path = driven(route, 900.0)
-    rec = match(path + 10.0 * route.tangent_at(900.0)[0], route, cov=400.0)
+    rec = match(path + 10.0 * route.tangent_at(900.0)[0], route, cov=100.0)
     assert rec.accepted
     assert rec.extra["along_observed"] == 0.0
     assert rec.extra["along_offset_m"] == 0.0
