@@ -14,6 +14,19 @@ FRAME = LocalFrame(48.0, 11.0, 500.0)
 T0 = 1.7e9
 
 
+def kinematics(
+    t, *, speed: float = 12.0, yaw_amp: float = 0.8, yaw_period: float = 60.0
+) -> tuple[np.ndarray, np.ndarray, np.ndarray, np.ndarray]:
+    """yaw, yaw rate, speed, acceleration at times ``t`` (s after the drive start)."""
+    w = 2 * np.pi / yaw_period
+    ws = 2 * np.pi / 37.0
+    yaw = 0.3 + yaw_amp * np.sin(w * t)
+    yaw_rate = yaw_amp * w * np.cos(w * t)
+    v = speed * (1 + 0.2 * np.sin(ws * t))
+    v_dot = speed * 0.2 * ws * np.cos(ws * t)
+    return yaw, yaw_rate, v, v_dot
+
+
 def drive(
     *,
     duration: float = 120.0,
@@ -39,15 +52,9 @@ def drive(
     rng = np.random.default_rng(seed)
     fine_dt = 1e-3
     tf = np.arange(0.0, duration + 1.0, fine_dt)
-    w = 2 * np.pi / yaw_period
-    ws = 2 * np.pi / 37.0
 
     def kin(t):
-        yaw = 0.3 + yaw_amp * np.sin(w * t)
-        yaw_rate = yaw_amp * w * np.cos(w * t)
-        v = speed * (1 + 0.2 * np.sin(ws * t))
-        v_dot = speed * 0.2 * ws * np.cos(ws * t)
-        return yaw, yaw_rate, v, v_dot
+        return kinematics(t, speed=speed, yaw_amp=yaw_amp, yaw_period=yaw_period)
 
     yaw_f, _, v_f, _ = kin(tf)
     ve, vn = v_f * np.cos(yaw_f), v_f * np.sin(yaw_f)

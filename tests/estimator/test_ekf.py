@@ -1,0 +1,230 @@
+"""The compiled filter: rotations, covariance propagation, updates against dense numpy
+references, pure strapdown integration, stop/resume invariance, and perfect sensors."""
+
+from __future__ import annotations
+
+import math
+
+import numpy as np
+import pytest
+from _synthetic_drive import FRAME, T0, drive, kinematics
+
+from estimator import ekf
+from estimator.params import Params
+from estimator.runner import _Driver, _prepare, run
+from estimator.simulate import simulate
+from estimator.simulate.model import dcm_from_euler
+
+
+def _skew(v):
+    return np.array([[0, -v[2], v[1]], [v[2], 0, -v[0]], [-v[1], v[0], 0]])
+
+
+def _random_cov(rng, n=ekf.NE):
+    a = rng.standard_normal((n, n))
+    return a @ a.T + n * np.eye(n)
+
+
+def _config(rng):
+    cfg = np.zeros(ekf.NC)
+    cfg[ekf.C_ARW2] = 1e-7
+    cfg[ekf.C_VRW2] = 1e-5
+    cfg[ekf.C_TAU_G] = 500.0
+    cfg[ekf.C_QBG] = 1e-12
+    cfg[ekf.C_TAU_A] = 700.0
+    cfg[ekf.C_QBA] = 1e-9
+    cfg[ekf.C_TAU_W] = 60.0
+    cfg[ekf.C_QW_H] = 0.02
+    cfg[ekf.C_QW_V] = 0.05
+    cfg[ekf.C_WIE : ekf.C_WIE + 3] = rng.standard_normal(3) * 1e-4
+    cfg[ekf.C_SCALE_ON] = 1.0
+    return cfg
+
+
+def test_euler_quaternion_matches_the_simulator_convention():
+    rng = np.random.default_rng(1)
+    C = np.empty((3, 3))
+    for _ in range(20):
+        r, p, y = rng.uniform(-1.2, 1.2, 3)
+        ekf.quat_to_dcm(ekf.euler_to_quat(r, p, y), C)
+        np.testing.assert_allclose(C, dcm_from_euler(r, p, y)[0], atol=1e-12)
+        np.testing.assert_allclose(ekf.dcm_to_euler(C), (r, p, y), atol=1e-12)
+
+
+def test_covariance_propagation_equals_dense_phi_p_phi_t_plus_q():
+    rng = np.random.default_rng(2)
+    P = _random_cov(rng)
+    cfg = _config(rng)
+    aux = np.zeros(ekf.NA)
+    T = 0.02
+    Cb = dcm_from_euler(0.1, -0.05, 2.0)[0]
+    fn = np.array([0.3, -0.2, 9.81])
+    aux[ekf.A_COV_T] = T
+    aux[ekf.A_COV_C : ekf.A_COV_C + 9] = (Cb * T).ravel()
+    aux[ekf.A_COV_F : ekf.A_COV_F + 3] = fn * T
+    w = cfg[ekf.C_WIE : ekf.C_WIE + 3]
+    F = np.zeros((ekf.NE, ekf.NE))
+    F[0:3, 0:3] = -_skew(w)
+    F[0:3, 9:12] = -Cb
+    F[3:6, 0:3] = -_skew(fn)
+    F[3:6, 3:6] = -2 * _skew(w)
+    F[3:6, 12:15] = -Cb
+    F[6:9, 3:6] = np.eye(3)
+    F[9:12, 9:12] = -np.eye(3) / cfg[ekf.C_TAU_G]
+    F[12:15, 12:15] = -np.eye(3) / cfg[ekf.C_TAU_A]
+    F[16:19, 16:19] = -np.eye(3) / cfg[ekf.C_TAU_W]
+    Phi = np.eye(ekf.NE) + F * T
+    q = np.zeros(ekf.NE)
+    q[0:3], q[3:6] = cfg[ekf.C_ARW2], cfg[ekf.C_VRW2]
+    q[9:12], q[12:15] = cfg[ekf.C_QBG], cfg[ekf.C_QBA]
+    q[16:18], q[18] = cfg[ekf.C_QW_H], cfg[ekf.C_QW_V]
+    expected = Phi @ P @ Phi.T + np.diag(q) * T
+    got = P.copy()
+    ekf.flush_covariance(got, aux, cfg)
+    np.testing.assert_allclose(got, expected, rtol=1e-12, atol=1e-12)
+    assert aux[ekf.A_COV_T] == 0.0
+    np.testing.assert_array_equal(got, got.T)
+
+
+def test_pseudo_position_update_is_the_kalman_update():
+    rng = np.random.default_rng(3)
+    P = _random_cov(rng) * 0.1
+    cfg = _config(rng)
+    x = np.zeros(ekf.NX)
+    x[ekf.X_QUAT] = 1.0
+    x[ekf.X_POS : ekf.X_POS + 3] = [10.0, -4.0, 1.0]
+    x[ekf.X_SCALE] = 1.0
+    z = np.array([11.0, -3.0])
+    R = np.array([[2.0, 0.3], [0.3, 0.5]])
+    H = np.zeros((2, ekf.NE))
+    H[0, ekf.E_POS] = H[1, ekf.E_POS + 1] = 1.0
+    S = H @ P @ H.T + R
+    K = P @ H.T @ np.linalg.inv(S)
+    y = z - x[:2]
+    dx = K @ y
+    P_exp = P - K @ H @ P
+    aux = np.zeros(ekf.NA)
+    x0 = x.copy()
+    res = ekf.pseudo_position_update(x, P, aux, cfg, z, R)
+    np.testing.assert_allclose(res[:2], y)
+    np.testing.assert_allclose(res[2:], dx[6:8], rtol=1e-12)
+    np.testing.assert_allclose(x[:3] - x0[:3], dx[6:9], rtol=1e-12)
+    np.testing.assert_allclose(x[ekf.X_VEL : ekf.X_VEL + 3], dx[3:6], rtol=1e-12, atol=1e-15)
+    np.testing.assert_allclose(P, P_exp, rtol=1e-10, atol=1e-12)
+    assert aux[ekf.A_INFLATE] == 1.0
+
+
+def test_attitude_injection_rotates_in_the_navigation_frame():
+    x = np.zeros(ekf.NX)
+    x[ekf.X_QUAT : ekf.X_QUAT + 4] = ekf.euler_to_quat(0.0, 0.0, 0.5)
+    dx = np.zeros(ekf.NE)
+    dx[2] = 0.01
+    ekf.inject(x, dx)
+    C = np.empty((3, 3))
+    ekf.quat_to_dcm(x[ekf.X_QUAT : ekf.X_QUAT + 4], C)
+    assert ekf.dcm_to_euler(C)[2] == pytest.approx(0.51, abs=1e-12)
+
+
+def _truth_at(log, t):
+    tr = FRAME.to_enu(log.truth.lat, log.truth.lon, log.truth.alt)
+    return np.column_stack([np.interp(t, log.truth.t, tr[:, i]) for i in range(3)])
+
+
+def test_pure_strapdown_with_a_perfect_imu_follows_the_truth():
+    """No GNSS, no wheel, no aiding: the mechanisation alone, from the true initial state."""
+    log, _, _ = drive(duration=60.0, imu_hz=100.0)
+    p = Params()
+    inp = _prepare(log, p, FRAME, ())
+    cfg = inp.cfg.copy()
+    cfg[ekf.C_AID_DT] = 1e9
+    k0 = int(inp.idx0[ekf.I_IMU]) - 1
+    t0 = inp.imu_t[k0]
+    x = inp.x0.copy()
+    x[ekf.X_POS : ekf.X_POS + 3] = _truth_at(log, [t0])[0]
+    yaw, _, speed, _ = kinematics(t0 - T0)
+    x[ekf.X_VEL : ekf.X_VEL + 3] = [speed * np.cos(yaw), speed * np.sin(yaw), 0.0]
+    x[ekf.X_QUAT : ekf.X_QUAT + 4] = ekf.euler_to_quat(0.0, 0.0, yaw)
+    aux, idx = inp.aux0.copy(), inp.idx0.copy()
+    out = np.zeros((5000, ekf.NO))
+    empty = np.empty(0)
+    status = ekf.run_until(
+        inp.imu_t[-1],
+        x,
+        inp.P0.copy(),
+        aux,
+        idx,
+        inp.imu_t,
+        inp.gyro,
+        inp.accel,
+        np.zeros(len(inp.imu_t), bool),
+        empty,
+        empty,
+        empty,
+        np.empty((0, 3)),
+        np.empty((0, 3)),
+        cfg,
+        out,
+    )
+    assert status == ekf.STATUS_DONE
+    n = idx[ekf.I_OUT]
+    err = out[:n, ekf.O_POS : ekf.O_POS + 3] - _truth_at(log, out[:n, ekf.O_T])
+    horizontal = np.hypot(err[:, 0], err[:, 1])
+    # 59 s and 700 m of free inertial navigation: 0.2 mm measured
+    assert horizontal.max() < 0.005, horizontal.max()
+    assert np.abs(err[:, 2]).max() < 0.005
+
+
+def test_stopping_and_resuming_changes_nothing():
+    log, _, _ = drive(
+        duration=40.0, gyro_noise=1e-3, accel_noise=0.02, gnss_sigma=0.5, wheel_sigma=0.05
+    )
+    p = Params()
+    inp = _prepare(log, p, FRAME, ())
+    one = _Driver(log, None, p, False, inp, None)
+    one.start()
+    many = _Driver(log, None, p, False, inp, None)
+    many._set_state(inp.x0, inp.P0, inp.aux0, inp.idx0)
+    many._alloc()
+    many._write_row()
+    many.aux[ekf.A_NEXT_OUT] = many.aux[ekf.A_TIME] + inp.cfg[ekf.C_OUT_DT]
+    for t in np.arange(inp.imu_t[0], inp.imu_t[-1] + 1.0, 0.37):
+        many._advance(t)
+    n = one.idx[ekf.I_OUT]
+    assert n == many.idx[ekf.I_OUT]
+    np.testing.assert_array_equal(one.out[:n], many.out[:n])
+    np.testing.assert_array_equal(one.x, many.x)
+    np.testing.assert_array_equal(one.P, many.P)
+
+
+def test_output_rows_grow_when_the_buffer_is_full():
+    log, _, _ = drive(duration=30.0)
+    p = Params()
+    inp = _prepare(log, p, FRAME, ())
+    d = _Driver(log, None, p, False, inp, None)
+    d._set_state(inp.x0, inp.P0, inp.aux0, inp.idx0)
+    d.out = np.zeros((5, ekf.NO))
+    d._write_row()
+    d.aux[ekf.A_NEXT_OUT] = d.aux[ekf.A_TIME] + inp.cfg[ekf.C_OUT_DT]
+    d._advance(math.inf)
+    ref = run(log, None, p, method="baseline", frame=FRAME)
+    assert d.idx[ekf.I_OUT] == len(ref.epochs)
+    np.testing.assert_array_equal(d.epochs().position, ref.epochs.position)
+
+
+@pytest.mark.parametrize("seed", [0, 1])
+def test_perfect_sensors_stay_on_truth(seed):
+    sim = simulate("short_tunnel", seed=seed, perfect=True)
+    log, frame = sim.log(), sim.frame
+    r = run(log, None, Params(), method="baseline", frame=frame)
+    e = r.epochs
+    inside = e.t <= log.truth.t[-1]
+    tr = frame.to_enu(log.truth.lat, log.truth.lon, log.truth.alt)
+    truth = np.column_stack([np.interp(e.t, log.truth.t, tr[:, i]) for i in range(3)])
+    err = np.linalg.norm((e.position - truth)[inside, :2], axis=1)
+    assert r.degraded_intervals, "the scenario has a tunnel"
+    assert e.degraded.any()
+    assert err.max() < 0.05, err.max()
+    assert err[e.degraded[inside]].max() < 0.05
+    heading = np.interp(e.t, log.truth.t, np.unwrap(log.truth.heading))
+    yaw_err = np.angle(np.exp(1j * (e.attitude[:, 2] - heading)))[inside]
+    assert np.degrees(np.abs(yaw_err)).max() < 0.05
