@@ -40,6 +40,10 @@ TWIST_TYPE = "geometry_msgs/msg/TwistStamped"
 WHEEL_TYPES = (ODOM_TYPE, TWIST_TYPE)
 TF_TYPE = "tf2_msgs/msg/TFMessage"
 BODY_FRAMES = ("base_link", "base_footprint", "body")
+ROS1_MAGIC = b"#ROSBAG V2.0\n"
+MCAP_MAGIC = b"\x89MCAP0\r\n"
+"""First bytes of a ROS 1 bag and of an mcap file: checked before the (whole-file) content hash,
+so a large file of the wrong kind is refused at once."""
 
 F64 = NDArray[np.float64]
 
@@ -99,6 +103,15 @@ def _bag_paths(path: Path) -> Path:
         )
     if path.stat().st_size == 0:
         raise LogError(path, "file is empty")
+    magic = ROS1_MAGIC if suffix == ".bag" else MCAP_MAGIC
+    try:
+        with path.open("rb") as fh:
+            head = fh.read(len(magic))
+    except OSError as exc:
+        raise LogError(path, f"cannot open the file ({exc.strerror or exc})") from None
+    if head != magic:
+        kind = "ROS 1 bag" if suffix == ".bag" else "ROS 2 bag / mcap file"
+        raise LogError(path, f"not a {kind} (it does not start with {magic!r})")
     return path
 
 
