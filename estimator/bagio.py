@@ -6,7 +6,10 @@ the topic choice and :data:`CACHE_VERSION`) so the second load of a log is near-
 
 Repairs, each reported in ``Log.warnings``: samples are sorted by time, exact duplicate stamps
 are dropped (the first is kept), IMU and wheel samples with non-finite values are dropped. GNSS
-fixes without a position are kept (they mark an outage) and are invalid by ``GnssData.valid``.
+fixes without a position are kept (they mark an outage) and are invalid by ``GnssData.valid``;
+a fix whose status says "fix" but whose position is not finite or out of range becomes NO_FIX,
+and a zero, negative or non-finite position variance becomes unknown (NaN). Irregular IMU
+sample intervals are reported, not changed. See ``docs/robustness.md``.
 """
 
 from __future__ import annotations
@@ -28,7 +31,7 @@ from numpy.typing import NDArray
 from .errors import LogError
 from .log import GnssData, ImuData, Log, TopicInfo, TruthData, WheelData
 
-CACHE_VERSION = 1
+CACHE_VERSION = 2
 CACHE_MAX_BYTES = 2_000_000_000
 """Least recently used cache entries are removed beyond this total size."""
 MIN_IMU_SAMPLES = 10
@@ -497,6 +500,27 @@ def _clean(
     return t, v
 
 
+IRREGULAR_FRACTION = 0.01
+"""An IMU stream is reported as irregular when more than this fraction of its sample intervals
+is off the median interval by more than half of it (dropped samples, jittery stamps)."""
+
+
+def _note_irregular(name: str, t: F64, warnings: list[str]) -> None:
+    """Irregular IMU intervals need no repair (the filter integrates over the actual
+    intervals), but they degrade the mechanisation, so they are reported."""
+    dt = np.diff(t)
+    if len(dt) < 2:
+        return
+    med = float(np.median(dt))
+    off = np.abs(dt - med) > 0.5 * med
+    if np.mean(off) > IRREGULAR_FRACTION:
+        warnings.append(
+            f"{name}: irregular sample intervals ({100 * np.mean(off):.0f} % differ from the "
+            f"median {1e3 * med:.1f} ms by more than half; longest {1e3 * float(dt.max()):.0f} "
+            "ms), integrated over the actual intervals"
+        )
+
+
 def _assemble(
     path: Path, roles: _Roles, raw: dict[str, Any], types: dict[str, str], counts: dict[str, int]
 ) -> Log:
@@ -507,6 +531,7 @@ def _assemble(
         raise LogError(
             path, f"too few IMU samples on {roles.imu}: {len(t)} (need at least {MIN_IMU_SAMPLES})"
         )
+    _note_irregular(f"IMU {roles.imu}", t, warnings)
     gyro, accel = v[:, :3], v[:, 3:6]
     body = next((b for b in raw["body_candidates"] if b), "base_link")
     if raw["edges"] and imu_frame and imu_frame != body:
@@ -521,7 +546,7 @@ def _assemble(
     gt, gv = _clean(f"GNSS {roles.gnss}", *raw["gnss"][:2], warnings, drop_nonfinite=False)
     if len(gt) == 0:
         raise LogError(path, f"GNSS topic {roles.gnss} has no messages")
-    gnss = _gnss(gt, gv)
+    gnss = _gnss(gt, gv, f"GNSS {roles.gnss}", warnings)
     if not gnss.valid.any():
         warnings.append(f"GNSS {roles.gnss}: no valid fix in the whole log")
 
@@ -556,13 +581,36 @@ def _assemble(
     return Log(str(path), imu, gnss, wheel, truth, topics, tuple(warnings))
 
 
-def _gnss(t: F64, v: F64) -> GnssData:
+def _gnss(t: F64, v: F64, name: str, warnings: list[str]) -> GnssData:
+    """Fixes with a status but no usable position become NO_FIX; a variance that is not a
+    positive number becomes unknown (NaN: the filter then uses its default sigma)."""
     status = np.where(np.isfinite(v[:, 3]), v[:, 3], -1).astype(np.int8)
     lat, lon, alt = v[:, 0].copy(), v[:, 1].copy(), v[:, 2].copy()
-    no_pos = ~(np.isfinite(lat) & np.isfinite(lon) & np.isfinite(alt))
+    with np.errstate(invalid="ignore"):
+        no_pos = ~(
+            np.isfinite(lat)
+            & np.isfinite(lon)
+            & np.isfinite(alt)
+            & (np.abs(lat) <= 90.0)
+            & (np.abs(lon) <= 180.0)
+        )
+    bad_pos = no_pos & (status >= 0)
+    if bad_pos.any():
+        warnings.append(
+            f"{name}: {int(bad_pos.sum())} fixes without a finite, in-range position, "
+            "treated as no fix"
+        )
     status[no_pos] = -1
     cov = v[:, 4:7].copy()
     cov[(status < 0) | (v[:, 7] == 0)] = np.nan
+    with np.errstate(invalid="ignore"):
+        bad_cov = np.isfinite(cov).any(axis=1) & ~np.all(np.isfinite(cov) & (cov > 0), axis=1)
+    if bad_cov.any():
+        warnings.append(
+            f"{name}: {int(bad_cov.sum())} fixes with a zero, negative or non-finite variance, "
+            "treated as unknown (the filter's default sigma is used)"
+        )
+        cov[bad_cov] = np.nan
     return GnssData(t, lat, lon, alt, status, cov)
 
 
