@@ -36,6 +36,10 @@ SUFFIXES: dict[str, RouteFormat] = {
 
 F64 = NDArray[np.float64]
 
+MAX_ROUTE_BYTES = 50_000_000
+"""Route files are read whole; a larger file is refused before it is read (a 1000 km route at
+one vertex per metre is about 40 MB of GeoJSON)."""
+
 
 @dataclass(frozen=True)
 class RouteLine:
@@ -128,10 +132,19 @@ def _read_text(p: Path) -> str:
         raise RouteError(p, "no such file")
     if p.is_dir():
         raise RouteError(p, "is a folder, expected a route file")
+    size = p.stat().st_size
+    if size > MAX_ROUTE_BYTES:
+        raise RouteError(
+            p,
+            f"file is {size / 1e6:.1f} MB; route files over {MAX_ROUTE_BYTES / 1e6:g} MB are "
+            "refused (a route is a polyline of at most a few MB)",
+        )
     try:
         text = p.read_bytes().decode("utf-8-sig")
     except UnicodeDecodeError as exc:
         raise RouteError(p, f"not a UTF-8 text file (byte {exc.start})") from None
+    except OSError as exc:
+        raise RouteError(p, f"cannot read the file ({exc.strerror or exc})") from None
     if not text.strip():
         raise RouteError(p, "file is empty")
     return text
@@ -181,6 +194,8 @@ def _geojson_lines(p: Path, text: str) -> list[_Candidate]:
         doc = json.loads(text)
     except json.JSONDecodeError as exc:
         raise RouteError(p, f"not valid JSON (line {exc.lineno}: {exc.msg})") from None
+    except RecursionError:
+        raise RouteError(p, "JSON nested too deeply to be a route") from None
     if not isinstance(doc, dict) or "type" not in doc:
         raise RouteError(p, "not GeoJSON (no 'type' member)")
     kind = doc["type"]
