@@ -31,12 +31,13 @@ class Projection:
 @dataclass(frozen=True)
 class Route:
     """A polyline in EN metres. Zero-length segments are removed at construction, so every
-    segment has a direction."""
+    segment has a direction; ``warnings`` says how many repeated vertices that removed."""
 
     xy: F64
     name: str = ""
     source: str = ""
     s: F64 = field(init=False, repr=False)
+    warnings: tuple[str, ...] = field(init=False, repr=False, compare=False)
     _unit: F64 = field(init=False, repr=False)
     _seglen: F64 = field(init=False, repr=False)
 
@@ -49,6 +50,17 @@ class Route:
             raise RouteError(self.source or None, "route has non-finite coordinates")
         keep = np.r_[True, np.hypot(*np.diff(xy, axis=0).T) > 1e-6]
         xy = xy[keep]
+        removed = int(np.count_nonzero(~keep))
+        object.__setattr__(
+            self,
+            "warnings",
+            (
+                f"route {self.source or self.name}: removed {removed} repeated vertices "
+                "(zero-length segments)",
+            )
+            if removed
+            else (),
+        )
         if len(xy) < 2:
             raise RouteError(self.source or None,
                              "route has fewer than 2 distinct points; need a polyline")

@@ -182,7 +182,9 @@ def run(
         matches=tuple(driver.records),
         degraded_intervals=inputs.degraded,
         t0=log.t_start,
-        warnings=tuple(log.warnings) + inputs.warnings,
+        warnings=tuple(log.warnings)
+        + inputs.warnings
+        + (route.warnings if route is not None else ()),
         resume=resume,
     )
 

@@ -152,7 +152,7 @@ def summarize(inputs: Inputs | Log) -> LogSummary:
         outages=outages,
         outage_threshold_s=thr,
         distances=distances_travelled(log, frame),
-        warnings=log.warnings,
+        warnings=log.warnings + (route.warnings if route is not None else ()),
         route=route_summary,
     )
 
