@@ -80,6 +80,13 @@ def _geodesic_gap(log: Log, frame: LocalFrame, line: RouteLine) -> float:
     return float(np.min(d))
 
 
+def _swapped(line: RouteLine) -> RouteLine | None:
+    """The line with latitude and longitude exchanged, if that is still a valid position."""
+    if np.any(np.abs(line.lon) > 90.0):
+        return None
+    return RouteLine(line.lon, line.lat, line.alt, line.name, line.source)
+
+
 def open_inputs(
     log_path: str | Path,
     route_path: str | Path | None = None,
@@ -101,6 +108,16 @@ def open_inputs(
         dist = route_distances(log, route, frame, max_points=500)
         if len(dist) and dist.min() > MAX_ROUTE_DISTANCE_M:
             far = _geodesic_gap(log, frame, line)
+            swapped = _swapped(line)
+            if swapped is not None and (
+                near := _geodesic_gap(log, frame, swapped)
+            ) <= MAX_ROUTE_DISTANCE_M:
+                raise RouteError(
+                    route_path,
+                    f"route is {far / 1000:.1f} km from {Path(log_path).name}, but "
+                    f"{near / 1000:.1f} km with latitude and longitude swapped: the file has "
+                    "them in the wrong order (GeoJSON and KML want lon,lat)",
+                )
             raise RouteError(
                 route_path,
                 f"route is {far / 1000:.1f} km from the nearest position of "
