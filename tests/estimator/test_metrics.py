@@ -4,6 +4,8 @@ from dataclasses import replace
 
 import numpy as np
 import pytest
+from hypothesis import given, settings
+from hypothesis import strategies as st
 
 import estimator.metrics as metrics_mod
 from estimator.geo import LocalFrame
@@ -190,16 +192,19 @@ def test_lane_offset_is_subtracted_where_asked():
     assert np.max(np.abs(whole.lateral_m[t < OUTAGE[0]])) < 1e-9
 
 
-def test_projection_in_chunks(monkeypatch):
-    xs = np.linspace(0.0, 1000.0, 2001)
-    route = Route(np.column_stack([xs, 3.0 * np.sin(xs / 40.0)]))
-    t = T0 + np.arange(0.0, 30.0 + 1e-9, 0.1)
-    run = make_run(ramp(t), 0.0, t=t)
-    whole = deviation_series(run, route)
-    monkeypatch.setattr(metrics_mod, "_PROJECT_BUDGET", 5000)
-    chunked = deviation_series(run, route)
-    np.testing.assert_allclose(chunked.lateral_m, whole.lateral_m)
-    np.testing.assert_allclose(chunked.lateral_m, route.project(run.epochs.position[:, :2]).lateral)
+@settings(max_examples=25, deadline=None)
+@given(st.integers(0, 2**31 - 1), st.integers(2, 400))
+def test_global_projection_equals_route_project(seed, n_vertices):
+    """The blocked nearest-point search finds what the brute-force projection finds."""
+    rng = np.random.default_rng(seed)
+    route = Route(np.cumsum(rng.normal(scale=30.0, size=(n_vertices, 2)), axis=0))
+    pts = rng.normal(scale=300.0, size=(300, 2)) + route.xy.mean(axis=0)
+    s, lat = metrics_mod._project(route, pts)
+    ref = route.project(pts)
+    np.testing.assert_allclose(np.abs(lat), ref.distance, atol=1e-9)
+    same_foot = np.hypot(*(route.point_at(s) - ref.foot).T) < 1e-6
+    np.testing.assert_allclose(lat[same_foot], ref.lateral[same_foot], atol=1e-9)
+    assert same_foot.mean() > 0.95  # ties between equally near segments may differ
 
 
 def _records():
