@@ -165,9 +165,9 @@ class NoiseParams:
     """Sensor noise and filter tuning (SI units except where the unit says otherwise)."""
 
     gyro_arw_deg_sqrt_h: float = param(
-        0.3, "gyro angle random walk", unit="deg/sqrt(h)", lo=0.001, hi=10, step=0.01)
+        0.3, "gyro angle random walk", unit="deg/sqrt(h)", lo=0.001, hi=100, step=0.01)
     accel_vrw_m_s_sqrt_h: float = param(
-        0.2, "accelerometer velocity random walk", unit="m/s/sqrt(h)", lo=0.001, hi=10,
+        0.2, "accelerometer velocity random walk", unit="m/s/sqrt(h)", lo=0.001, hi=100,
         step=0.01)
     gyro_bias_sigma_deg_h: float = param(
         10.0, "gyro bias instability (Gauss-Markov sigma)", unit="deg/h", lo=0.01, hi=1000,

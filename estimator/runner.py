@@ -367,9 +367,12 @@ def _stationary(
     m = max(3, round(0.5 / max(dt, 1e-4)))
     g_mean = uniform_filter1d(gyro, m, axis=0, mode="nearest")
     quiet = np.linalg.norm(g_mean, axis=1) < math.radians(n.zupt_gyro_deg_s)
-    a = np.linalg.norm(accel, axis=1)
-    a_var = uniform_filter1d(a * a, m, mode="nearest") - uniform_filter1d(a, m, mode="nearest") ** 2
-    imu_still = quiet & (np.sqrt(np.maximum(a_var, 0)) < n.zupt_accel_std_m_s2)
+    with np.errstate(over="ignore", invalid="ignore"):
+        a = np.linalg.norm(accel, axis=1)
+        a_var = (
+            uniform_filter1d(a * a, m, mode="nearest") - uniform_filter1d(a, m, mode="nearest") ** 2
+        )
+        imu_still = quiet & (np.sqrt(np.maximum(a_var, 0)) < n.zupt_accel_std_m_s2)
     if len(wheel_t) < 2:
         return imu_still
     j = np.clip(np.searchsorted(wheel_t, imu_t), 1, len(wheel_t) - 1)
