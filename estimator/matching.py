@@ -153,6 +153,76 @@ def shifted_route(
     return Route(out, name=route.name, source=route.source)
 
 
+_BLOCK = 32
+"""route segments per bounding circle in the nearest-point search"""
+
+
+@njit(cache=True)
+def _segment_d2(rxy: F64, j: int, x: float, y: float) -> tuple[float, float]:
+    dx = rxy[j + 1, 0] - rxy[j, 0]
+    dy = rxy[j + 1, 1] - rxy[j, 1]
+    f = ((x - rxy[j, 0]) * dx + (y - rxy[j, 1]) * dy) / (dx * dx + dy * dy)
+    f = min(max(f, 0.0), 1.0)
+    ex = x - rxy[j, 0] - f * dx
+    ey = y - rxy[j, 1] - f * dy
+    return ex * ex + ey * ey, f
+
+
+@njit(cache=True)
+def _nearest_all(rxy: F64, rs: F64, pts: F64, s_out: F64, lat_out: F64) -> None:
+    """Global nearest foot point of every point: arc length and signed lateral offset (left
+    positive), as :meth:`Route.project` computes them. Blocks of segments inside bounding
+    circles are skipped when they cannot beat the best so far, and the search starts from the
+    previous point's segment, so a drive costs little more than one pass over the blocks."""
+    nseg = rxy.shape[0] - 1
+    nblk = (nseg + _BLOCK - 1) // _BLOCK
+    cx = np.empty(nblk)
+    cy = np.empty(nblk)
+    rad = np.empty(nblk)
+    for b in range(nblk):
+        j0, j1 = b * _BLOCK, min((b + 1) * _BLOCK, nseg) + 1
+        cx[b] = 0.5 * (rxy[j0:j1, 0].min() + rxy[j0:j1, 0].max())
+        cy[b] = 0.5 * (rxy[j0:j1, 1].min() + rxy[j0:j1, 1].max())
+        r = 0.0
+        for j in range(j0, j1):
+            r = max(r, np.hypot(rxy[j, 0] - cx[b], rxy[j, 1] - cy[b]))
+        rad[b] = r
+    bj = 0
+    for i in range(pts.shape[0]):
+        x, y = pts[i, 0], pts[i, 1]
+        best, bf = _segment_d2(rxy, bj, x, y)
+        for b in range(nblk):
+            lb = np.hypot(x - cx[b], y - cy[b]) - rad[b]
+            if lb > 0.0 and lb * lb > best:
+                continue
+            for j in range(b * _BLOCK, min((b + 1) * _BLOCK, nseg)):
+                d, f = _segment_d2(rxy, j, x, y)
+                if d < best:
+                    best, bj, bf = d, j, f
+        seg = rs[bj + 1] - rs[bj]
+        fx = rxy[bj, 0] + bf * (rxy[bj + 1, 0] - rxy[bj, 0])
+        fy = rxy[bj, 1] + bf * (rxy[bj + 1, 1] - rxy[bj, 1])
+        # the side is taken from the segment the foot's arc length starts, as Route does
+        jt = bj + 1 if bf >= 1.0 and bj + 1 < nseg else bj
+        dx = (rxy[jt + 1, 0] - rxy[jt, 0]) / (rs[jt + 1] - rs[jt])
+        dy = (rxy[jt + 1, 1] - rxy[jt, 1]) / (rs[jt + 1] - rs[jt])
+        cross = dx * (y - fy) - dy * (x - fx)
+        dist = np.sqrt(best)
+        s_out[i] = rs[bj] + bf * seg
+        lat_out[i] = cross if abs(cross) >= dist - 1e-9 else np.copysign(dist, cross)
+
+
+def project_on_route(route: Route, xy: ArrayLike) -> tuple[F64, F64]:
+    """Arc length and signed lateral offset (positive = left) of every point, nearest over
+    the whole route; as :meth:`Route.project` without a search window, but fast and lean on
+    memory for long logs and long routes."""
+    p = np.ascontiguousarray(np.atleast_2d(np.asarray(xy, np.float64))[:, :2])
+    s = np.empty(len(p))
+    lat = np.empty(len(p))
+    _nearest_all(route.xy, route.s, p, s, lat)
+    return s, lat
+
+
 def route_arc_length(
     route: Route, xy: ArrayLike, *, s_guess: float | None = None, params: Params
 ) -> float:
@@ -162,7 +232,7 @@ def route_arc_length(
     if not np.all(np.isfinite(p)):
         raise RoutefuseError(None, "route match: position to project is not finite")
     if s_guess is None:
-        return float(route.project(p).s[0])
+        return float(project_on_route(route, p)[0][0])
     return float(route.project(p, s_guess, params.window.route_search_m).s[0])
 
 
@@ -201,15 +271,16 @@ def learn_lane_offset(
         return 0.0
     pts, ts = p[sel], t_a[sel]
     if s_guess is None:
-        proj = route.project(pts)
+        s, lateral = project_on_route(route, pts)
     else:
         travel = float(np.sum(np.hypot(*np.diff(pts, axis=0).T))) if len(pts) > 1 else 0.0
         proj = route.project(pts, s_guess, travel + params.window.route_search_m)
-    inside = (proj.s > 1e-6) & (proj.s < route.length - 1e-6)
+        s, lateral = proj.s, proj.lateral
+    inside = (s > 1e-6) & (s < route.length - 1e-6)
     if not inside.any():
         return 0.0
     w = np.exp(-(t_end - ts[inside]) / op.time_constant_s)
-    offset = float(np.sum(w * proj.lateral[inside]) / np.sum(w))
+    offset = float(np.sum(w * lateral[inside]) / np.sum(w))
     if not np.isfinite(offset) or abs(offset) > op.max_offset_m:
         return 0.0
     return offset
@@ -597,7 +668,7 @@ def match_window(
     win = resample_polyline(win_raw, h, anchor="end")
     span = (len(win) - 1) * h
     if s_guess is None or not np.isfinite(s_guess):
-        s_anchor = float(route.project(win[0]).s[0])
+        s_anchor = float(project_on_route(route, win[0])[0][0])
     else:
         s_anchor = float(route.project(win[0], s_guess - span, params.window.route_search_m).s[0])
     ext = params.extensions

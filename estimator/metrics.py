@@ -14,11 +14,10 @@ from dataclasses import dataclass
 from typing import Literal
 
 import numpy as np
-from numba import njit
 from numpy.typing import NDArray
 
 from .log import Log
-from .matching import learn_lane_offset
+from .matching import learn_lane_offset, project_on_route
 from .params import Params
 from .results import Run
 from .route import Route
@@ -107,73 +106,6 @@ class DeviationSeries:
 
 def _wrap_deg(a: F64) -> F64:
     return (np.degrees(a) + 180.0) % 360.0 - 180.0
-
-
-_BLOCK = 32
-"""route segments per bounding circle in the nearest-point search"""
-
-
-@njit(cache=True)
-def _segment_d2(rxy: F64, j: int, x: float, y: float) -> tuple[float, float]:
-    dx = rxy[j + 1, 0] - rxy[j, 0]
-    dy = rxy[j + 1, 1] - rxy[j, 1]
-    f = ((x - rxy[j, 0]) * dx + (y - rxy[j, 1]) * dy) / (dx * dx + dy * dy)
-    f = min(max(f, 0.0), 1.0)
-    ex = x - rxy[j, 0] - f * dx
-    ey = y - rxy[j, 1] - f * dy
-    return ex * ex + ey * ey, f
-
-
-@njit(cache=True)
-def _nearest_all(rxy: F64, rs: F64, pts: F64, s_out: F64, lat_out: F64) -> None:
-    """Global nearest foot point of every point: arc length and signed lateral offset (left
-    positive), as :meth:`Route.project` computes them. Blocks of segments inside bounding
-    circles are skipped when they cannot beat the best so far, and the search starts from the
-    previous point's segment, so a drive costs little more than one pass over the blocks."""
-    nseg = rxy.shape[0] - 1
-    nblk = (nseg + _BLOCK - 1) // _BLOCK
-    cx = np.empty(nblk)
-    cy = np.empty(nblk)
-    rad = np.empty(nblk)
-    for b in range(nblk):
-        j0, j1 = b * _BLOCK, min((b + 1) * _BLOCK, nseg) + 1
-        cx[b] = 0.5 * (rxy[j0:j1, 0].min() + rxy[j0:j1, 0].max())
-        cy[b] = 0.5 * (rxy[j0:j1, 1].min() + rxy[j0:j1, 1].max())
-        r = 0.0
-        for j in range(j0, j1):
-            r = max(r, np.hypot(rxy[j, 0] - cx[b], rxy[j, 1] - cy[b]))
-        rad[b] = r
-    bj = 0
-    for i in range(pts.shape[0]):
-        x, y = pts[i, 0], pts[i, 1]
-        best, bf = _segment_d2(rxy, bj, x, y)
-        for b in range(nblk):
-            lb = np.hypot(x - cx[b], y - cy[b]) - rad[b]
-            if lb > 0.0 and lb * lb > best:
-                continue
-            for j in range(b * _BLOCK, min((b + 1) * _BLOCK, nseg)):
-                d, f = _segment_d2(rxy, j, x, y)
-                if d < best:
-                    best, bj, bf = d, j, f
-        seg = rs[bj + 1] - rs[bj]
-        fx = rxy[bj, 0] + bf * (rxy[bj + 1, 0] - rxy[bj, 0])
-        fy = rxy[bj, 1] + bf * (rxy[bj + 1, 1] - rxy[bj, 1])
-        # the side is taken from the segment the foot's arc length starts, as Route does
-        jt = bj + 1 if bf >= 1.0 and bj + 1 < nseg else bj
-        dx = (rxy[jt + 1, 0] - rxy[jt, 0]) / (rs[jt + 1] - rs[jt])
-        dy = (rxy[jt + 1, 1] - rxy[jt, 1]) / (rs[jt + 1] - rs[jt])
-        cross = dx * (y - fy) - dy * (x - fx)
-        dist = np.sqrt(best)
-        s_out[i] = rs[bj] + bf * seg
-        lat_out[i] = cross if abs(cross) >= dist - 1e-9 else np.copysign(dist, cross)
-
-
-def _project(route: Route, xy: F64) -> tuple[F64, F64]:
-    """Arc length and signed lateral offset of every point on the whole route."""
-    s = np.empty(len(xy))
-    lat = np.empty(len(xy))
-    _nearest_all(route.xy, route.s, np.ascontiguousarray(xy, np.float64), s, lat)
-    return s, lat
 
 
 def interval_mask(t: F64, intervals: Sequence[tuple[float, float]]) -> NDArray[np.bool_]:
@@ -286,7 +218,7 @@ def deviation_series(
     than from the route centreline."""
     ep = run.epochs
     xy = ep.position[:, :2]
-    s, lat = _project(route, xy) if len(xy) else (np.empty(0), np.empty(0))
+    s, lat = project_on_route(route, xy) if len(xy) else (np.empty(0), np.empty(0))
     if subtract_lane_offset and len(xy):
         lat = lat - _lane_offsets(run, route, s, lat, params or run.params)
     dh = _wrap_deg(ep.attitude[:, 2] - route.heading_at(s)) if len(xy) else np.empty(0)

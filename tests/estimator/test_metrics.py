@@ -7,10 +7,9 @@ import pytest
 from hypothesis import given, settings
 from hypothesis import strategies as st
 
-import estimator.metrics as metrics_mod
 from estimator.geo import LocalFrame
 from estimator.log import GnssData, ImuData, Log, TruthData
-from estimator.matching import match_window
+from estimator.matching import match_window, project_on_route
 from estimator.metrics import deviation_series, format_table, match_summary, method_metrics
 from estimator.params import Params
 from estimator.results import Epochs, GateDecision, Run
@@ -199,7 +198,7 @@ def test_global_projection_equals_route_project(seed, n_vertices):
     rng = np.random.default_rng(seed)
     route = Route(np.cumsum(rng.normal(scale=30.0, size=(n_vertices, 2)), axis=0))
     pts = rng.normal(scale=300.0, size=(300, 2)) + route.xy.mean(axis=0)
-    s, lat = metrics_mod._project(route, pts)
+    s, lat = project_on_route(route, pts)
     ref = route.project(pts)
     np.testing.assert_allclose(np.abs(lat), ref.distance, atol=1e-9)
     same_foot = np.hypot(*(route.point_at(s) - ref.foot).T) < 1e-6
