@@ -235,6 +235,17 @@ def test_rotation_gate_rejects_a_large_fitted_rotation():
     assert rec.verdict == "rejected: rotation"
 
 
+def test_fitted_rotation_is_the_heading_correction():
+    route = straight()
+    path = driven(route, 600.0, lane=0.0)
+    drifted = path[0] + (path - path[0]) @ rot(0.5).T  # DR heading 0.5 deg left of truth
+    rec = match(drifted, route, lane=0.0, s_guess=None)
+    assert rec.accepted
+    assert np.degrees(rec.rotation_rad) == pytest.approx(-0.5, abs=1e-9)
+    # shape noise 1 m over a 250 m window: about 0.1 deg
+    assert 0.05 < np.degrees(rec.extra["heading_sigma_rad"]) < 0.2
+
+
 def test_correction_cap_rejects_a_large_jump():
     route = straight()
     path = driven(route, 600.0, lane=0.0)
