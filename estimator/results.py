@@ -54,7 +54,8 @@ class MatchRecord:
     n_pairs: int
     rotation_rad: float
     translation: F64
-    """(2,) t of p_ref = R p_dr + t"""
+    """(2,) t of the fit R s_i + t ~ route_points; R p_dr + t is p_ref, or z when the window was
+    matched to the lane line (the route shifted by the lane offset, ``extra["lane_path"] = 1``)"""
     residual_m: float
     """RMS of |R s_i + t - t_i|"""
     heading_cos: float
