@@ -569,8 +569,9 @@ class ClientView:
         cam = self.client.camera
         offset = np.asarray(cam.position) - np.asarray(cam.look_at)
         target = np.array([xy[0], xy[1], 0.0]) + self._panel_shift(float(np.linalg.norm(offset)))
-        cam.look_at = tuple(target)
+        # position first: assigning it drags look_at along by the same move.
         cam.position = tuple(target + offset)
+        cam.look_at = tuple(target)
 
     def set_progress(self, fraction: float, message: str) -> None:
         done = fraction >= 1.0
