@@ -115,12 +115,12 @@ STATUS_DIVERGED = 2
 # small rotation helpers
 
 
-@njit(cache=True)
+@njit(cache=True, error_model="numpy")
 def quat_to_dcm(q: np.ndarray, C: np.ndarray) -> None:
     _dcm(q[0], q[1], q[2], q[3], C)
 
 
-@njit(cache=True)
+@njit(cache=True, error_model="numpy")
 def _dcm(w, a, b, c, C):
     C[0, 0] = 1 - 2 * (b * b + c * c)
     C[0, 1] = 2 * (a * b - w * c)
@@ -133,7 +133,7 @@ def _dcm(w, a, b, c, C):
     C[2, 2] = 1 - 2 * (a * a + b * b)
 
 
-@njit(cache=True)
+@njit(cache=True, error_model="numpy")
 def _qmul(p0, p1, p2, p3, q0, q1, q2, q3):
     return (
         p0 * q0 - p1 * q1 - p2 * q2 - p3 * q3,
@@ -143,7 +143,7 @@ def _qmul(p0, p1, p2, p3, q0, q1, q2, q3):
     )
 
 
-@njit(cache=True)
+@njit(cache=True, error_model="numpy")
 def _rotvec_quat(r0, r1, r2):
     th = math.sqrt(r0 * r0 + r1 * r1 + r2 * r2)
     if th < 1e-9:
@@ -152,7 +152,7 @@ def _rotvec_quat(r0, r1, r2):
     return math.cos(0.5 * th), s * r0, s * r1, s * r2
 
 
-@njit(cache=True)
+@njit(cache=True, error_model="numpy")
 def _set_quat(x, q0, q1, q2, q3):
     n = math.sqrt(q0 * q0 + q1 * q1 + q2 * q2 + q3 * q3)
     x[X_QUAT] = q0 / n
@@ -161,7 +161,7 @@ def _set_quat(x, q0, q1, q2, q3):
     x[X_QUAT + 3] = q3 / n
 
 
-@njit(cache=True)
+@njit(cache=True, error_model="numpy")
 def euler_to_quat(roll: float, pitch: float, yaw: float) -> np.ndarray:
     """Body->ENU quaternion of ``Rz(yaw) Ry(-pitch) Rx(roll)``: FLU body, yaw from East, pitch
     positive nose up, roll positive right side down (the convention of
@@ -174,7 +174,7 @@ def euler_to_quat(roll: float, pitch: float, yaw: float) -> np.ndarray:
     return np.array([b[0], b[1], b[2], b[3]])
 
 
-@njit(cache=True)
+@njit(cache=True, error_model="numpy")
 def dcm_to_euler(C: np.ndarray) -> tuple[float, float, float]:
     """Roll, pitch, yaw of a body->ENU matrix (inverse of :func:`euler_to_quat`)."""
     s = C[2, 0]
@@ -186,7 +186,7 @@ def dcm_to_euler(C: np.ndarray) -> tuple[float, float, float]:
 # covariance propagation
 
 
-@njit(cache=True)
+@njit(cache=True, error_model="numpy")
 def _f_times(M, Cb, fn, w, inv_tau_g, inv_tau_a, inv_tau_w, out):
     """out = F M for the error-state F, using its block sparsity (~50 products per column
     instead of 361)."""
@@ -230,14 +230,14 @@ def _f_times(M, Cb, fn, w, inv_tau_g, inv_tau_a, inv_tau_w, out):
         out[18, c] = -inv_tau_w * M[18, c]
 
 
-@njit(cache=True)
+@njit(cache=True, error_model="numpy")
 def flush_covariance(P: np.ndarray, aux: np.ndarray, cfg: np.ndarray) -> None:
     """P <- Phi P Phi^T + Q over the time accumulated since the last call, with
     Phi = I + F T and F built from the interval's mean attitude and specific force."""
     _flush(P, aux, cfg, np.empty((NE, NE)), np.empty((NE, NE)), np.empty((3, 3)), np.empty(3))
 
 
-@njit(cache=True)
+@njit(cache=True, error_model="numpy")
 def _flush(P, aux, cfg, A, B, Cb, fn):
     T = aux[A_COV_T]
     if T <= 0.0:
@@ -274,7 +274,7 @@ def _flush(P, aux, cfg, A, B, Cb, fn):
 # measurement update
 
 
-@njit(cache=True)
+@njit(cache=True, error_model="numpy")
 def _inv_small(S, m, Si):
     if m == 1:
         Si[0, 0] = 1.0 / S[0, 0]
@@ -304,7 +304,7 @@ def _inv_small(S, m, Si):
     Si[2, 2] = (a * e - b * d) / det
 
 
-@njit(cache=True)
+@njit(cache=True, error_model="numpy")
 def _innovation_cov(P, H, R, m, PHt, S, Si):
     for i in range(NE):
         for a in range(m):
@@ -325,7 +325,7 @@ def _innovation_cov(P, H, R, m, PHt, S, Si):
     _inv_small(S, m, Si)
 
 
-@njit(cache=True)
+@njit(cache=True, error_model="numpy")
 def _nis(y, Si, m):
     acc = 0.0
     for a in range(m):
@@ -334,7 +334,7 @@ def _nis(y, Si, m):
     return acc
 
 
-@njit(cache=True)
+@njit(cache=True, error_model="numpy")
 def _apply_update(x, P, y, m, PHt, Si, scale_on):
     """x <- x (+) K y, P <- P - K H P, with K = P H^T S^-1 (the error state is injected into
     the nominal state at once, so it is zero between updates)."""
@@ -343,7 +343,7 @@ def _apply_update(x, P, y, m, PHt, Si, scale_on):
     _apply(x, P, y, m, PHt, Si, scale_on, K, dx)
 
 
-@njit(cache=True)
+@njit(cache=True, error_model="numpy")
 def _apply(x, P, y, m, PHt, Si, scale_on, K, dx):
     for i in range(NE):
         for a in range(m):
@@ -369,7 +369,7 @@ def _apply(x, P, y, m, PHt, Si, scale_on, K, dx):
     inject(x, dx)
 
 
-@njit(cache=True)
+@njit(cache=True, error_model="numpy")
 def inject(x: np.ndarray, dx: np.ndarray) -> None:
     """Add an error-state estimate to the nominal state."""
     for i in range(3):
@@ -385,7 +385,7 @@ def inject(x: np.ndarray, dx: np.ndarray) -> None:
     _set_quat(x, q[0], q[1], q[2], q[3])
 
 
-@njit(cache=True)
+@njit(cache=True, error_model="numpy")
 def _body_velocity_update(x, P, cfg, w_speed, use_wheel, C, H, y, R, PHt, S, Si):
     """Wheel speed (forward = scale * wheel) and the non-holonomic constraint (no lateral or
     vertical body velocity) as one observation of the body-frame velocity C^T v."""
@@ -426,7 +426,7 @@ def _body_velocity_update(x, P, cfg, w_speed, use_wheel, C, H, y, R, PHt, S, Si)
     _apply_update(x, P, y, m, PHt, Si, cfg[C_SCALE_ON] > 0)
 
 
-@njit(cache=True)
+@njit(cache=True, error_model="numpy")
 def _zupt_update(x, P, aux, cfg, H, y, R, PHt, S, Si):
     """Zero velocity, and zero angular rate (the mean gyro while still measures its bias plus
     the Earth rate)."""
@@ -462,7 +462,7 @@ def _zupt_update(x, P, aux, cfg, H, y, R, PHt, S, Si):
         aux[A_GYRO_SUM + a] = 0.0
 
 
-@njit(cache=True)
+@njit(cache=True, error_model="numpy")
 def _widen_position(P, y, S):
     """Add diag(max(0, y_i^2 - S_ii)) to the E/N position variance: the fix then agrees with
     the filter to about one sigma and is accepted, and P stays positive definite."""
@@ -472,7 +472,7 @@ def _widen_position(P, y, S):
             P[E_POS + a, E_POS + a] += d
 
 
-@njit(cache=True)
+@njit(cache=True, error_model="numpy")
 def _gnss_update(x, P, aux, cfg, t, t_fix, pos, var, C, H, y, R, PHt, S, Si):
     """One fix: antenna lever arm, the fix moved to the state time with the velocity, separate
     chi-square gates on horizontal and vertical innovations. Returns 1 if the fix was used."""
@@ -525,7 +525,7 @@ def _gnss_update(x, P, aux, cfg, t, t_fix, pos, var, C, H, y, R, PHt, S, Si):
     return 1
 
 
-@njit(cache=True)
+@njit(cache=True, error_model="numpy")
 def pseudo_position_update(
     x: np.ndarray,
     P: np.ndarray,
@@ -560,7 +560,7 @@ def pseudo_position_update(
 # the loop
 
 
-@njit(cache=True)
+@njit(cache=True, error_model="numpy")
 def write_row(
     x: np.ndarray, P: np.ndarray, aux: np.ndarray, idx: np.ndarray, out: np.ndarray
 ) -> None:
@@ -596,7 +596,7 @@ def write_row(
     aux[A_GNSS_USED] = 0.0
 
 
-@njit(cache=True)
+@njit(cache=True, error_model="numpy")
 def _finite(x, P):
     acc = 0.0
     for i in range(NX):
@@ -606,7 +606,7 @@ def _finite(x, P):
     return math.isfinite(acc)
 
 
-@njit(cache=True)
+@njit(cache=True, error_model="numpy")
 def run_until(
     t_stop: float,
     x: np.ndarray,

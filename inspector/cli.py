@@ -13,6 +13,7 @@ from estimator.errors import RoutefuseError
 
 COMMANDS = (
     "estimator.commands.info",
+    "estimator.commands.run",
     "estimator.commands.simulate",
     "inspector.commands.serve",
 )

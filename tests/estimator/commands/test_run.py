@@ -1,0 +1,152 @@
+"""``routefuse run`` end to end on a simulated bag written into tmp_path."""
+
+from __future__ import annotations
+
+import csv
+import json
+import re
+from pathlib import Path
+
+import pytest
+
+from estimator.simulate import simulate
+from inspector.cli import main
+
+DATA = Path(__file__).resolve().parents[3] / ".." / "shared" / "data"
+
+ROUTE_KEYS = {
+    "max_pos_dev_m",
+    "mean_pos_dev_m",
+    "rmse_pos_dev_m",
+    "mean_heading_dev_deg",
+    "rmse_heading_dev_deg",
+}
+TRUTH_KEYS = {
+    "max_h_err_m",
+    "mean_h_err_m",
+    "rmse_h_err_m",
+    "rmse_along_m",
+    "rmse_cross_m",
+    "rmse_heading_err_deg",
+}
+
+
+@pytest.fixture(scope="module")
+def bag(tmp_path_factory):
+    out = tmp_path_factory.mktemp("sim")
+    sim = simulate("short_tunnel", seed=2, duration_s=60.0)
+    return sim.write(out)
+
+
+@pytest.fixture(autouse=True)
+def _cache(tmp_path, monkeypatch):
+    monkeypatch.setenv("ROUTEFUSE_CACHE_DIR", str(tmp_path / "cache"))
+
+
+def test_table_and_json(bag, tmp_path, capsys):
+    log, route = bag
+    out = tmp_path / "result.json"
+    argv = ["run", str(log), "--route", str(route), "--json", str(out), "--outage", "20:30"]
+    assert main(argv) == 0
+    text = capsys.readouterr().out
+    lines = text.splitlines()
+    assert lines[0].split()[:2] == ["Scenario", "Method"]
+    assert "Max pos. dev. [m]" in lines[0] and "H. err RMSE [m]" in lines[0]
+    assert [line.split()[1] for line in lines[2:4]] == ["baseline", "proposed"]
+    spans = re.search(r"GNSS-degraded: ([\d.]+)-([\d.]+) s, ([\d.]+)-", text)
+    assert spans is not None
+    assert float(spans[1]) == pytest.approx(20.0, abs=0.25)
+    assert float(spans[2]) == pytest.approx(30.0, abs=0.25)
+    assert float(spans[3]) == pytest.approx(38.0, abs=0.5)  # the tunnel
+    doc = json.loads(out.read_text())
+    assert set(doc) >= {
+        "log",
+        "route",
+        "duration_s",
+        "distance_m",
+        "degraded_intervals",
+        "methods",
+        "matches",
+    }
+    assert doc["log"] == str(log) and doc["route"] == str(route)
+    assert doc["duration_s"] == pytest.approx(60.0, abs=0.05)
+    assert 700 < doc["distance_m"] < 1000  # 15 m/s for 60 s, minus the alignment second
+    assert len(doc["degraded_intervals"]) == 2  # the injected outage and the tunnel
+    a, b = doc["degraded_intervals"][0]
+    assert a == pytest.approx(20.0, abs=0.25) and b == pytest.approx(30.0, abs=0.25)
+    assert set(doc["methods"]) == {"baseline", "proposed"}
+    for m in doc["methods"].values():
+        assert set(m) == {"route", "truth"}
+        assert set(m["route"]) == ROUTE_KEYS
+        assert set(m["truth"]) == TRUTH_KEYS
+        assert all(isinstance(v, float) for v in m["route"].values())
+    matches = doc["matches"]
+    assert set(matches) == {"attempted", "accepted", "rejected"}
+    assert matches["attempted"] >= matches["accepted"] > 0
+    assert sum(matches["rejected"].values()) == matches["attempted"] - matches["accepted"]
+    prop, base = doc["methods"]["proposed"], doc["methods"]["baseline"]
+    assert prop["truth"]["rmse_h_err_m"] < base["truth"]["rmse_h_err_m"]
+
+
+def test_methods_and_csv(bag, tmp_path, capsys):
+    log, route = bag
+    out = tmp_path / "epochs.csv"
+    argv = ["run", str(log), "--route", str(route), "--method", "paper", "--csv", str(out)]
+    assert main([*argv, "--quiet"]) == 0
+    lines = capsys.readouterr().out.splitlines()
+    assert [line.split()[1] for line in lines[2:3]] == ["paper"]
+    with out.open() as f:
+        rows = list(csv.DictReader(f))
+    assert {r["method"] for r in rows} == {"paper"}
+    assert 55 * 20 < len(rows) < 61 * 20 + 60
+    assert {r["degraded"] for r in rows} == {"0", "1"}
+    assert all(float(r["sigma_east_m"]) > 0 for r in rows)
+
+
+def test_parameters_reach_the_filter(bag, tmp_path):
+    log, route = bag
+    cfg = tmp_path / "p.toml"
+    cfg.write_text("[gates]\nmin_pairs = 500\n")
+    out = tmp_path / "r.json"
+    argv = ["run", str(log), "--route", str(route), "--json", str(out), "--quiet"]
+    assert main([*argv, "--config", str(cfg)]) == 0
+    doc = json.loads(out.read_text())
+    assert doc["matches"]["accepted"] == 0
+    assert doc["matches"]["rejected"] == {"min_pairs": doc["matches"]["attempted"]}
+    # the per-parameter flag wins over the file
+    assert main([*argv, "--config", str(cfg), "--gates-min-pairs", "5"]) == 0
+    assert json.loads(out.read_text())["matches"]["accepted"] > 0
+
+
+def test_errors_are_one_line(bag, tmp_path, capsys):
+    log, route = bag
+    assert main(["run", str(tmp_path / "missing.mcap"), "--route", str(route)]) == 2
+    err = capsys.readouterr().err.strip()
+    assert err.startswith("routefuse: error:") and "missing.mcap" in err
+    assert "\n" not in err
+    with pytest.raises(SystemExit) as exc:
+        main(["run", str(log), "--route", str(route), "--outage", "30:20"])
+    assert exc.value.code == 2
+    assert "END > START" in capsys.readouterr().err
+    assert main(["run", str(log), "--route", str(route), "--outage", "500:600"]) == 2
+    assert "starts after the log ends" in capsys.readouterr().err
+    bad = ["run", str(log), "--route", str(route), "--json", str(tmp_path / "no" / "x.json")]
+    assert main([*bad, "--quiet"]) == 2
+    assert "cannot write" in capsys.readouterr().err
+
+
+def test_comma_bag_with_an_outage(tmp_path, capsys):
+    log = DATA / "comma2k19" / "i280.mcap"
+    if not log.exists():
+        pytest.skip(f"{log} not present (shared sample data)")
+    out = tmp_path / "r.json"
+    argv = [
+        "run", str(log), "--route", str(DATA / "comma2k19" / "i280_route.geojson"),
+        "--outage", "20:50", "--sensors-imu-pitch-deg", "-3.8", "--sensors-imu-yaw-deg", "0.9",
+        "--json", str(out), "--quiet",
+    ]  # fmt: skip
+    assert main(argv) == 0
+    doc = json.loads(out.read_text())
+    base, prop = doc["methods"]["baseline"], doc["methods"]["proposed"]
+    assert prop["route"]["rmse_pos_dev_m"] < base["route"]["rmse_pos_dev_m"]
+    assert prop["truth"]["rmse_cross_m"] < base["truth"]["rmse_cross_m"]
