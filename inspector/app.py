@@ -497,9 +497,14 @@ class ClientView:
 
     def _set_plots(self, session: Session) -> None:
         dev = session.deviation
-        for which in ("position", "heading"):
-            kw = dev.uplot(which, self.playhead.t)
+        kinds = dev.kinds
+        for k, which in enumerate(("position", "heading", "truth")):
             h = self.plots.get(which)
+            if which not in kinds:
+                if h is not None:
+                    h.visible = False
+                continue
+            kw = dev.uplot(which, self.playhead.t)
             if h is None:
                 with self.plots_tab:
                     self.plots[which] = self.client.gui.add_uplot(
@@ -508,10 +513,11 @@ class ClientView:
                         scales=kw["scales"],
                         title=kw["title"],
                         aspect=1.6,
-                        order=self.metrics.order - (1.0 if which == "position" else 0.5),
+                        order=self.metrics.order - 1.0 + 0.25 * k,
                     )
             else:
                 h.data = kw["data"]
+                h.visible = True
 
     def sync_params(self) -> None:
         """Show the controller's parameters (after another tab changed them, or a failure)."""
@@ -560,7 +566,8 @@ class ClientView:
             if self._plot_t is None or abs(self._plot_t - t) > tl.duration / 800:
                 self._plot_t = t
                 for which, h in self.plots.items():
-                    h.data = s.deviation.uplot(which, t)["data"]
+                    if which in s.deviation.kinds:
+                        h.data = s.deviation.uplot(which, t)["data"]
             if self.follow:
                 self._follow(data, t)
 

@@ -12,6 +12,7 @@ from typing import Any
 import numpy as np
 from numpy.typing import NDArray
 
+from estimator.metrics import deviation_series, match_summary, method_metrics
 from estimator.results import Run
 from estimator.route import Route
 
@@ -30,35 +31,11 @@ def wrap_deg(a: F64) -> F64:
     return (np.asarray(a) + 180.0) % 360.0 - 180.0
 
 
-def route_deviation(run: Run, route: Route) -> tuple[F64, F64]:
-    """Cross-track position deviation (m, positive = left of the route) and heading deviation
-    (deg, vehicle yaw minus route direction) of each epoch, as in the paper's figures.
-
-    Projection is windowed along the drive so a looping route cannot capture a point on its
-    other branch."""
-    xy = run.epochs.position[:, :2]
-    n = len(xy)
-    s = np.empty(n)
-    lat = np.empty(n)
-    guess: float | None = None
-    chunk = 512
-    for a in range(0, n, chunk):
-        block = xy[a : a + chunk]
-        if guess is None:
-            proj = route.project(block)
-        else:
-            proj = route.project(block, np.full(len(block), guess), 2000.0)
-        s[a : a + chunk] = proj.s
-        lat[a : a + chunk] = proj.lateral
-        guess = float(proj.s[-1])
-    heading = np.degrees(route.heading_at(s))
-    yaw = np.degrees(run.epochs.attitude[:, 2])
-    return lat, wrap_deg(yaw - heading)
-
-
 @dataclass(frozen=True)
 class DeviationPlot:
-    """Both runs' deviations on one time grid (s after the log start), thinned for display."""
+    """Both runs' deviations from the route (``estimator.metrics.deviation_series``, the
+    quantities of the metrics table) on one time grid (s after the log start), thinned for
+    display; and the horizontal error against truth when the log has truth."""
 
     t: F64
     position: tuple[F64, F64]
@@ -67,26 +44,39 @@ class DeviationPlot:
     """(baseline, proposed) heading deviation, deg"""
     outages: tuple[tuple[float, float], ...]
     """GNSS-degraded intervals, s after start"""
+    truth: tuple[F64, F64] | None = None
+    """(baseline, proposed) horizontal error against truth, m (NaN where truth is missing)"""
 
     @classmethod
     def build(cls, inputs: Any, baseline: Run, proposed: Run) -> DeviationPlot:
         route: Route = inputs.route
+        log = getattr(inputs, "log", None)
         t0 = proposed.t0
         tp = proposed.epochs.t - t0
         grid = tp if len(tp) <= MAX_PLOT_POINTS else np.linspace(tp[0], tp[-1], MAX_PLOT_POINTS)
         outages = tuple((a - t0, b - t0) for a, b in proposed.degraded_intervals)
-        grid = (
-            np.unique(np.concatenate([grid, *[np.array(iv) for iv in outages]]))
-            if outages
-            else grid
-        )
-        pos, hdg = [], []
+        if outages:
+            grid = np.unique(np.concatenate([grid, np.ravel(outages)]))
+        pos, hdg, err = [], [], []
         for run in (baseline, proposed):
-            lat, dh = route_deviation(run, route)
+            series = deviation_series(run, route, log)
             tr = run.epochs.t - t0
-            pos.append(_resample(tr, np.abs(lat), grid))
-            hdg.append(_resample(tr, dh, grid, angle=True))
-        return cls(t=grid, position=(pos[0], pos[1]), heading=(hdg[0], hdg[1]), outages=outages)
+            pos.append(_resample(tr, series.pos_dev_m, grid))
+            hdg.append(_resample(tr, series.heading_dev_deg, grid, angle=True))
+            if series.truth is not None and len(series.truth.t) > 1:
+                err.append(_resample(series.truth.t - t0, series.truth.h_err_m, grid, gaps=True))
+        truth = (err[0], err[1]) if len(err) == 2 else None
+        return cls(
+            t=grid,
+            position=(pos[0], pos[1]),
+            heading=(hdg[0], hdg[1]),
+            outages=outages,
+            truth=truth,
+        )
+
+    @property
+    def kinds(self) -> tuple[str, ...]:
+        return ("position", "heading") + (("truth",) if self.truth is not None else ())
 
     def outage_mask(self, t: F64) -> F64:
         m = np.zeros(len(t))
@@ -98,12 +88,14 @@ class DeviationPlot:
         """Keyword arguments for ``gui.add_uplot`` / the handle's props: data with the time
         marker inserted at ``t_now`` (three samples: down, up, down on a fixed 0..1 scale, so it
         spans the plot height whatever the data range)."""
-        y_base, y_prop = self.position if which == "position" else self.heading
+        y_base, y_prop = {"position": self.position, "heading": self.heading, "truth": self.truth}[
+            which
+        ] or (self.t * 0, self.t * 0)
         t = self.t
         k = int(np.searchsorted(t, t_now))
         xs = np.insert(t, k, [t_now] * 3)
-        yb = np.insert(y_base, k, [np.interp(t_now, t, y_base)] * 3)
-        yp = np.insert(y_prop, k, [np.interp(t_now, t, y_prop)] * 3)
+        yb = np.insert(y_base, k, [np.interp(t_now, t, np.nan_to_num(y_base))] * 3)
+        yp = np.insert(y_prop, k, [np.interp(t_now, t, np.nan_to_num(y_prop))] * 3)
         shade = self.outage_mask(xs)
         now = np.full(len(xs), -1.0)
         now[k + 1] = 2.0
@@ -140,56 +132,71 @@ class DeviationPlot:
         }
 
 
-def _resample(t: F64, y: F64, grid: F64, *, angle: bool = False) -> F64:
+def _resample(t: F64, y: F64, grid: F64, *, angle: bool = False, gaps: bool = False) -> F64:
+    """``y(t)`` on ``grid``; with ``gaps`` the grid points farther than a second from any
+    sample are NaN (truth that stops is not drawn as a straight line)."""
     ok = np.isfinite(y)
     if ok.sum() < 2:
-        return np.zeros(len(grid))
+        return np.full(len(grid), np.nan if gaps else 0.0)
     if angle:
-        return wrap_deg(np.degrees(np.interp(grid, t[ok], np.unwrap(np.radians(y[ok])))))
-    return np.interp(grid, t[ok], y[ok])
+        out = wrap_deg(np.degrees(np.interp(grid, t[ok], np.unwrap(np.radians(y[ok])))))
+    else:
+        out = np.interp(grid, t[ok], y[ok])
+    if gaps:
+        i = np.clip(np.searchsorted(t[ok], grid), 1, ok.sum() - 1)
+        near = np.minimum(np.abs(grid - t[ok][i - 1]), np.abs(t[ok][i] - grid))
+        out[near > 1.0] = np.nan
+    return out
 
 
-def _fmt(v: float, digits: int = 3) -> str:
+def _fmt(v: float | None, digits: int = 3) -> str:
     return "–" if v is None or not np.isfinite(v) else f"{v:.{digits}f}"
 
 
-def deviation_stats(pos: F64, hdg: F64) -> dict[str, float]:
-    """The paper's table columns for one method over the given samples."""
-    if len(pos) == 0:
-        return {k: np.nan for k in ("max", "mean", "rmse", "hmean", "hrmse")}
-    return {
-        "max": float(np.max(pos)),
-        "mean": float(np.mean(pos)),
-        "rmse": float(np.sqrt(np.mean(pos**2))),
-        "hmean": float(np.mean(hdg)),
-        "hrmse": float(np.sqrt(np.mean(hdg**2))),
-    }
+_ROW_LABELS = (
+    ("route", "max_pos_dev_m", "max position deviation [m]", 1),
+    ("route", "mean_pos_dev_m", "mean position deviation [m]", 3),
+    ("route", "rmse_pos_dev_m", "position deviation RMSE [m]", 3),
+    ("route", "mean_heading_dev_deg", "mean heading deviation [deg]", 3),
+    ("route", "rmse_heading_dev_deg", "heading deviation RMSE [deg]", 3),
+    ("truth", "max_h_err_m", "max error vs truth [m]", 1),
+    ("truth", "mean_h_err_m", "mean error vs truth [m]", 3),
+    ("truth", "rmse_h_err_m", "error vs truth RMSE [m]", 3),
+    ("truth", "rmse_along_m", "along-track RMSE [m]", 3),
+    ("truth", "rmse_cross_m", "cross-track RMSE [m]", 3),
+    ("truth", "rmse_heading_err_deg", "heading error RMSE [deg]", 3),
+)
 
 
 def metrics_rows(inputs: Any, baseline: Run, proposed: Run) -> tuple[tuple[str, str, str], ...]:
-    """Rows (quantity, baseline, proposed): the paper's route-relative deviations inside the
-    GNSS-degraded intervals, then the match counts."""
+    """Rows (quantity, baseline, proposed) of the ``routefuse run`` table
+    (``estimator.metrics.method_metrics`` over the GNSS-degraded intervals), then the match
+    summary."""
     route: Route = inputs.route
-    stats = []
-    for run in (baseline, proposed):
-        lat, dh = route_deviation(run, route)
-        mask = np.zeros(len(run.epochs.t), bool)
-        for a, b in run.degraded_intervals:
-            mask |= (run.epochs.t >= a) & (run.epochs.t <= b)
-        if not mask.any():
-            mask[:] = True
-        stats.append(deviation_stats(np.abs(lat[mask]), dh[mask]))
-    labels = [
-        ("max", "max position deviation [m]"),
-        ("mean", "mean position deviation [m]"),
-        ("rmse", "position deviation RMSE [m]"),
-        ("hmean", "mean heading deviation [deg]"),
-        ("hrmse", "heading deviation RMSE [deg]"),
-    ]
-    rows = [(label, _fmt(stats[0][k]), _fmt(stats[1][k])) for k, label in labels]
-    n = len(proposed.matches)
-    acc = sum(m.accepted for m in proposed.matches)
-    rows.append(("match attempts (accepted / rejected)", "–", f"{n} ({acc} / {n - acc})"))
+    log = getattr(inputs, "log", None)
+    per_run = [method_metrics(run, route, log) for run in (baseline, proposed)]
+    rows = []
+    for part, key, label, digits in _ROW_LABELS:
+        values = [
+            getattr(getattr(m, part), key) if getattr(m, part) is not None else None
+            for m in per_run
+        ]
+        if part == "truth" and all(v is None for v in values):
+            continue
+        rows.append((label, *(_fmt(v, digits) for v in values)))
+    summary = match_summary(proposed)
+    rejected = summary["rejected"]
+    assert isinstance(rejected, dict)
+    n_rej = sum(rejected.values())
+    rows.append(
+        (
+            "match attempts (accepted / rejected)",
+            "–",
+            f"{summary['attempted']} ({summary['accepted']} / {n_rej})",
+        )
+    )
+    for gate, n in sorted(rejected.items(), key=lambda kv: -kv[1]):
+        rows.append((f"rejected first by {gate}", "–", str(n)))
     return tuple(rows)
 
 
