@@ -8,6 +8,7 @@ import json
 import math
 import sys
 import time
+from collections.abc import Sequence
 from pathlib import Path
 from typing import Any
 
@@ -16,7 +17,8 @@ import numpy as np
 from ..bagio import TopicChoice
 from ..errors import ConfigError, RoutefuseError
 from ..inputs import open_inputs
-from ..metrics import format_table, match_summary, method_metrics
+from ..log import Log
+from ..metrics import MethodMetrics, format_table, match_summary, method_metrics
 from ..params import Method
 from ..results import Run
 from ..runner import run
@@ -162,6 +164,39 @@ def _distance(r: Run) -> float:
     return float(np.sum(np.hypot(*np.diff(p[:, :2], axis=0).T))) if len(p) > 1 else 0.0
 
 
+def results_document(
+    log_path: str | Path,
+    route_path: str | Path,
+    log: Log,
+    runs: dict[str, Run],
+    metrics: dict[str, MethodMetrics],
+    *,
+    outages: Sequence[tuple[float, float]] = (),
+) -> dict[str, Any]:
+    """The ``--json`` document (also written by ``routefuse export`` as metrics.json)."""
+    methods = list(runs)
+    first = next(iter(runs.values()))
+    matching = [m for m in methods if m != "baseline"]
+    summaries = {m: match_summary(runs[m]) for m in matching}
+    key = "proposed" if "proposed" in summaries else (matching[0] if matching else None)
+    return {
+        "log": str(log_path),
+        "route": str(route_path),
+        "duration_s": log.duration_s,
+        "distance_m": _distance(first),
+        "degraded_intervals": [[a - first.t0, b - first.t0] for a, b in first.degraded_intervals],
+        "methods": {m: metrics[m].to_dict() for m in methods},
+        "matches": summaries[key]
+        if key is not None
+        else {"attempted": 0, "accepted": 0, "rejected": {}},
+        "matches_by_method": summaries,
+        "t0": first.t0,
+        "outages": [list(o) for o in outages],
+        "n_epochs": {m: metrics[m].n_epochs for m in methods},
+        "warnings": list(dict.fromkeys(w for r in runs.values() for w in r.warnings)),
+    }
+
+
 def execute(args: argparse.Namespace) -> int:
     params = params_from_args(args)
     methods: list[Method] = list(dict.fromkeys(args.method or ("baseline", "proposed")))
@@ -223,23 +258,7 @@ def execute(args: argparse.Namespace) -> int:
         print(f"routefuse run: warning: {w}", file=sys.stderr)
 
     if args.json is not None:
-        key = "proposed" if "proposed" in summaries else (matching[0] if matching else None)
-        doc = {
-            "log": str(args.log),
-            "route": str(args.route),
-            "duration_s": log.duration_s,
-            "distance_m": _distance(first),
-            "degraded_intervals": intervals,
-            "methods": {m: metrics[m].to_dict() for m in methods},
-            "matches": summaries[key]
-            if key is not None
-            else {"attempted": 0, "accepted": 0, "rejected": {}},
-            "matches_by_method": summaries,
-            "t0": first.t0,
-            "outages": [list(o) for o in args.outage],
-            "n_epochs": {m: metrics[m].n_epochs for m in methods},
-            "warnings": list(warnings),
-        }
+        doc = results_document(args.log, args.route, log, runs, metrics, outages=args.outage)
         try:
             args.json.write_text(json.dumps(doc, indent=2) + "\n", encoding="utf-8")
         except OSError as exc:
