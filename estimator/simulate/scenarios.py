@@ -39,19 +39,19 @@ def _open_sky_warmup(speed: float) -> tuple[Piece, ...]:
 def long_tunnel() -> Scenario:
     pieces = (
         _open_sky_warmup(20.0)
-        + straight(150, speed_m_s=24.0, grade=0.01)
-        + straight(2400, tunnel=True)
+        + straight(150, speed_m_s=22.0, grade=0.01)
+        + straight(3000, tunnel=True)
         + turn(-12, 2500, transition_m=120, tunnel=True)
-        + straight(2000, tunnel=True, grade=-0.005)
+        + straight(2600, tunnel=True, grade=-0.005)
         + turn(8, 3000, transition_m=120, tunnel=True)
-        + straight(900, tunnel=True)
+        + straight(1000, tunnel=True)
         + straight(400, speed_m_s=22.0, grade=0.0)
         + turn(-30, 400, speed_m_s=18.0)
         + straight(300)
     )
     return Scenario(
         name="long_tunnel",
-        description="6.1 km almost straight expressway tunnel at 86 km/h after 80 s of open "
+        description="7.5 km almost straight expressway tunnel at 79 km/h after 100 s of open "
         "sky with turns; the paper's long-tunnel case, DR drifts by hundreds of metres",
         pieces=pieces,
         origin=(40.12, 115.21, 620.0),
@@ -64,19 +64,19 @@ def spiral_tunnel() -> Scenario:
     pieces = (
         _open_sky_warmup(18.0)
         + straight(250, speed_m_s=18.0, grade=0.03)
-        + straight(150, tunnel=True)
+        + straight(300, tunnel=True)
         + turn(280, 330, transition_m=90, tunnel=True, speed_m_s=17.0)
-        + straight(250, tunnel=True)
+        + straight(600, tunnel=True)
         + turn(-40, 500, tunnel=True)
-        + straight(200, tunnel=True, grade=0.0)
+        + straight(700, tunnel=True, grade=0.0)
         + straight(400, speed_m_s=20.0)
         + turn(30, 350)
         + straight(200)
     )
     return Scenario(
         name="spiral_tunnel",
-        description="2.7 km climbing spiral tunnel (280 deg at R 330 m, 3 % grade) at 61 km/h; "
-        "the paper's curved-tunnel case, DR drifts by tens of metres",
+        description="3.6 km climbing spiral tunnel (280 deg at R 330 m, 3 % grade, the exit "
+        "passes under the entry) at 61 km/h; the paper's curved-tunnel case",
         pieces=pieces,
         origin=(40.31, 115.47, 780.0),
         heading0_deg=-35.0,
@@ -88,24 +88,26 @@ def multi_tunnel() -> Scenario:
     pieces = (
         _open_sky_warmup(20.0)
         + straight(150, speed_m_s=22.0)
-        + straight(900, tunnel=True)
-        + straight(120)
+        + straight(1500, tunnel=True)
+        + straight(150)
         + turn(25, 600)
         + straight(100)
-        + straight(500, tunnel=True, grade=0.02)
+        + straight(800, tunnel=True, grade=0.02)
         + turn(-45, 700, tunnel=True)
-        + straight(300, tunnel=True)
-        + straight(200, grade=0.0)
+        + straight(600, tunnel=True)
+        + straight(150, grade=0.0)
         + turn(-20, 500)
         + straight(150)
-        + straight(700, tunnel=True)
+        + straight(600, tunnel=True)
+        + turn(15, 1500, tunnel=True)
+        + straight(300, tunnel=True)
         + straight(500)
         + turn(40, 300, speed_m_s=17.0)
         + straight(200)
     )
     return Scenario(
         name="multi_tunnel",
-        description="three tunnels (0.9, 1.3 and 0.7 km) with short open gaps at 79 km/h; the "
+        description="three tunnels (1.5, 2.0 and 1.3 km) with short open gaps at 79 km/h; the "
         "paper's multi-segment case; the receiver is silent in tunnels (no NavSatFix at all)",
         pieces=pieces,
         origin=(39.87, 114.68, 450.0),

@@ -8,6 +8,7 @@ rates are.
 
 from __future__ import annotations
 
+from collections.abc import Sequence
 from dataclasses import dataclass, fields, replace
 
 import numpy as np
@@ -52,13 +53,13 @@ class ImuErrorModel:
     """1-sigma of the Gauss-Markov part of the gyro bias"""
     gyro_bias_tau_s: float = 300.0
     gyro_arw_deg_sqrt_h: float = 0.25
-    gyro_scale_ppm: float = 0.0
+    gyro_scale_ppm: float = 1500.0
     """1-sigma of a constant scale-factor error drawn per axis"""
     accel_turn_on_bias_mg: float = 1.5
     accel_bias_instability_mg: float = 0.2
     accel_bias_tau_s: float = 300.0
     accel_vrw_m_s_sqrt_h: float = 0.1
-    accel_scale_ppm: float = 0.0
+    accel_scale_ppm: float = 1000.0
     gyro_lsb_rad_s: float = 2.0**-16
     """about 0.0009 deg/s"""
     accel_lsb_m_s2: float = 2.0**-12
@@ -146,9 +147,9 @@ class GnssErrorModel:
     wander_h_m: float = 0.8
     wander_v_m: float = 1.5
     wander_tau_s: float = 60.0
-    degraded_before_s: float = 4.0
+    degraded_before_s: float = 8.0
     """degraded fixes this long before a tunnel entry"""
-    degraded_after_s: float = 6.0
+    degraded_after_s: float = 8.0
     """degraded fixes this long after reacquisition"""
     reacquisition_s: float = 2.0
     """no fix this long after a tunnel exit"""
@@ -156,6 +157,9 @@ class GnssErrorModel:
     """1-sigma of the horizontal multipath jumps"""
     multipath_v_m: float = 5.0
     multipath_hold_s: float = 1.0
+    portal_bias_h_m: float = 3.0
+    """1-sigma of the slowly growing horizontal bias per degraded window (cuttings, walls)"""
+    portal_bias_v_m: float = 5.0
     degraded_reported_h_m: float = 2.5
     """1-sigma the receiver reports for degraded fixes (it underestimates the jumps)"""
 
@@ -173,6 +177,8 @@ class GnssErrorModel:
             reacquisition_s=0.0,
             multipath_h_m=0.0,
             multipath_v_m=0.0,
+            portal_bias_h_m=0.0,
+            portal_bias_v_m=0.0,
             degraded_reported_h_m=0.0,
         )
 
@@ -186,9 +192,19 @@ class GnssErrorModel:
 
 
 def gnss_errors(
-    model: GnssErrorModel, rng: np.random.Generator, t: F64, degraded: NDArray[np.bool_]
-) -> tuple[F64, F64]:
-    """ENU errors (N, 3) and reported variances (N, 3) at the fix times ``t`` (relative s)."""
+    model: GnssErrorModel,
+    rng: np.random.Generator,
+    t: F64,
+    windows: Sequence[tuple[float, float, float, float]] = (),
+) -> tuple[F64, F64, NDArray[np.bool_]]:
+    """ENU errors (N, 3), reported variances (N, 3) and the degraded mask at the fix times
+    ``t`` (relative s).
+
+    ``windows`` are the degraded intervals ``(start, end, weight_at_start, weight_at_end)``:
+    inside them the multipath jumps are added, plus a per-window bias (a cutting's wall
+    reflects the signal from one side) that grows linearly between the two weights, so the
+    fixes drift away before a portal and come back after it.
+    """
     n = len(t)
     dt = 1.0 / model.rate_hz
     white = rng.standard_normal((n, 3)) * np.array(
@@ -201,10 +217,18 @@ def gnss_errors(
     jumps = rng.standard_normal((int(hold.max(initial=0)) + 1, 3)) * np.array(
         [model.multipath_h_m, model.multipath_h_m, model.multipath_v_m]
     )
-    err = err + np.where(degraded[:, None], jumps[hold], 0.0)
+    bias = rng.standard_normal((len(windows), 3)) * np.array(
+        [model.portal_bias_h_m, model.portal_bias_h_m, model.portal_bias_v_m]
+    )
+    degraded = np.zeros(n, bool)
+    for k, (a, b, w0, w1) in enumerate(windows):
+        inside = (t >= a) & (t < b)
+        degraded |= inside
+        w = w0 + (w1 - w0) * (t[inside] - a) / max(b - a, 1e-9)
+        err[inside] += jumps[hold[inside]] + w[:, None] * bias[k]
     var_h = model.nominal_sigma_h_m**2
     var_v = model.nominal_sigma_v_m**2
     var = np.tile([max(var_h, 1e-4), max(var_h, 1e-4), max(var_v, 1e-4)], (n, 1))
     deg_var = [model.degraded_reported_h_m**2] * 2 + [(2.0 * model.degraded_reported_h_m) ** 2]
     var = np.where(degraded[:, None], np.maximum(var, deg_var), var)
-    return err, var
+    return err, var, degraded

@@ -219,13 +219,14 @@ def simulate(
     ]
     g = sc.gnss
     blocked = [(a, b + g.reacquisition_s) for a, b in tunnel_t]
-    degraded = [(a - g.degraded_before_s, a) for a, _ in tunnel_t] + [
-        (b + g.reacquisition_s, b + g.reacquisition_s + g.degraded_after_s) for _, b in tunnel_t
+    windows = [(a - g.degraded_before_s, a, 0.0, 1.0) for a, _ in tunnel_t] + [
+        (b + g.reacquisition_s, b + g.reacquisition_s + g.degraded_after_s, 1.0, 0.0)
+        for _, b in tunnel_t
     ]
+    degraded = [(a, b) for a, b, _, _ in windows if b > a]
     gnss_ns, gnss_rel = _stamps(t0_ns, g.rate_hz, duration)
     no_fix = _in_any(gnss_rel, blocked)
-    is_degraded = _in_any(gnss_rel, degraded) & ~no_fix
-    err, var = gnss_errors(g, rng_gnss, gnss_rel, is_degraded)
+    err, var, _ = gnss_errors(g, rng_gnss, gnss_rel, windows)
     kg = traj.at(gnss_rel)
     geo = frame.to_geodetic(kg.position + err)
     geo[no_fix] = np.nan

@@ -79,10 +79,10 @@ def test_gauss_markov_is_stationary_with_the_right_correlation() -> None:
 
 
 def test_gyro_bias_measured_over_a_drive_matches_the_drawn_one() -> None:
-    """Over a simulated drive, measured minus ideal gyro averages to the drawn bias (turn-on
-    plus Gauss-Markov), whatever the motion."""
+    """Over a simulated drive, measured minus (scaled) ideal gyro averages to the drawn bias
+    (turn-on plus Gauss-Markov), whatever the motion."""
     sim = simulate("short_tunnel", seed=11)
-    meas = sim.imu.gyro - sim.ideal_gyro
+    meas = sim.imu.gyro - (1.0 + sim.imu_errors.gyro_scale) * sim.ideal_gyro
     drawn = sim.imu_errors.gyro_bias.mean(axis=0)
     white = 0.25 * np.pi / 180 / 60 / np.sqrt(sim.duration_s)
     np.testing.assert_allclose(meas.mean(axis=0), drawn, atol=4 * white)
@@ -124,15 +124,19 @@ def test_wheel_scale_error_in_a_simulated_drive() -> None:
 def test_gnss_errors_nominal_and_degraded() -> None:
     model = GnssErrorModel()
     t = np.arange(0.0, 20_000.0, 1.0 / model.rate_hz)
-    degraded = (t % 100.0) < 10.0
-    err, var = gnss_errors(model, _rng(9), t, degraded)
+    windows = [(a, a + 10.0, 1.0, 1.0) for a in np.arange(0.0, 20_000.0, 100.0)]
+    err, var, degraded = gnss_errors(model, _rng(9), t, windows)
+    assert degraded.sum() == 10 * 200 * model.rate_hz
     open_err = err[~degraded]
     assert np.std(open_err[:, :2]) == pytest.approx(model.nominal_sigma_h_m, rel=0.1)
     assert np.std(open_err[:, 2]) == pytest.approx(model.nominal_sigma_v_m, rel=0.15)
     np.testing.assert_allclose(var[~degraded, 0], model.nominal_sigma_h_m**2)
     # degraded: metre-level jumps held for a second, inflated (but optimistic) covariance
     deg_h = np.std(err[degraded, :2])
-    assert deg_h == pytest.approx(np.hypot(model.nominal_sigma_h_m, model.multipath_h_m), rel=0.1)
+    expected = np.sqrt(
+        model.nominal_sigma_h_m**2 + model.multipath_h_m**2 + model.portal_bias_h_m**2
+    )
+    assert deg_h == pytest.approx(expected, rel=0.1)
     assert np.all(var[degraded, 0] == model.degraded_reported_h_m**2)
     assert model.degraded_reported_h_m < deg_h
 
@@ -158,3 +162,26 @@ def test_gnss_outage_encodings() -> None:
         deg = (sim.gnss.t >= d0) & (sim.gnss.t < d1)
         assert deg.sum() > 0 and np.all(sim.gnss.valid[deg])
         assert np.all(sim.gnss.cov_enu[deg, 0] > sc.gnss.nominal_sigma_h_m**2)
+
+
+def test_portal_bias_ramps_in_and_out() -> None:
+    model = GnssErrorModel(
+        white_h_m=0.0,
+        white_v_m=0.0,
+        wander_h_m=0.0,
+        wander_v_m=0.0,
+        multipath_h_m=0.0,
+        multipath_v_m=0.0,
+    )
+    t = np.arange(0.0, 40.0, 0.2)
+    err, _, degraded = gnss_errors(
+        model, _rng(4), t, [(10.0, 18.0, 0.0, 1.0), (25.0, 33.0, 1.0, 0.0)]
+    )
+    assert not err[~degraded].any()
+    before = err[(t >= 10.0) & (t < 18.0)]
+    np.testing.assert_allclose(before[0], 0.0, atol=1e-12)
+    steps = np.diff(before, axis=0)
+    np.testing.assert_allclose(steps, np.broadcast_to(steps[0], steps.shape), atol=1e-12)
+    assert np.linalg.norm(before[-1]) > 0.1
+    after = err[(t >= 25.0) & (t < 33.0)]
+    assert np.linalg.norm(after[0]) > np.linalg.norm(after[-1])
