@@ -16,6 +16,7 @@ from typing import Any
 
 import numpy as np
 import viser
+from viser import _messages
 
 from estimator.errors import RoutefuseError
 from estimator.params import ParamSpec, get_param, param_specs, params_to_toml
@@ -243,8 +244,30 @@ class ClientView:
                 "upload route", hint=f".geojson, .gpx, .kml or .csv, {limit}"
             )
             self.upload_route.on_upload(self._uploader("route"))
+            self._refuse_large_uploads(uploads.max_bytes)
         folders = "\n".join(f"- `{r}`" for r in self.app.controller.folders.roots)
         gui.add_markdown(f"Files are listed from:\n{folders}")
+
+    def _refuse_large_uploads(self, max_bytes: int) -> None:
+        """Drop an oversized upload when it starts, before its parts are buffered in memory.
+
+        viser has no public size limit; its transfer state for this tab is dropped right after
+        viser creates it, so the parts that follow are ignored."""
+        gui = self.client.gui
+        states = getattr(gui, "_current_file_upload_states", None)
+        interface = getattr(gui, "_websock_interface", None)
+        if states is None or interface is None:
+            return
+
+        def check(_client_id: Any, message: _messages.FileTransferStartUpload) -> None:
+            if message.size_bytes > max_bytes:
+                states.pop(message.transfer_uuid, None)
+                try:
+                    self.app.controller.uploads.check_size(message.filename, message.size_bytes)
+                except RoutefuseError as exc:
+                    self.notify_error(exc, "Upload rejected")
+
+        interface.register_handler(_messages.FileTransferStartUpload, check)
 
     def _build_commands(self) -> None:
         gui = self.client.gui
@@ -325,7 +348,9 @@ class ClientView:
 
     def _on_save(self, event: viser.GuiEvent) -> None:
         text = params_to_toml(self.app.controller.params)
-        self.client.send_file_download("routefuse-params.toml", text.encode("utf-8"))
+        self.client.send_file_download(
+            "routefuse-params.toml", text.encode("utf-8"), save_immediately=True
+        )
 
     def _on_log_choice(self, event: viser.GuiEvent) -> None:
         if event.client is None:

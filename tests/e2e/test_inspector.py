@@ -49,13 +49,23 @@ def _sample(tmp_path_factory: pytest.TempPathFactory) -> tuple[Path, Path]:
     return out / "long_tunnel.mcap", out / "long_tunnel.route.geojson"
 
 
+UPLOAD_LIMIT = 1_000_000
+
+
 @pytest.fixture(scope="module")
 def inspector(tmp_path_factory):
     from inspector.commands.serve import start
 
     log, route = _sample(tmp_path_factory)
+    extra = tmp_path_factory.mktemp("extra")
+    (extra / "broken.mcap").write_bytes(b"this is not an mcap file")
     server, controller, app = start(
-        host="127.0.0.1", port=_free_port(), data_dirs=[], log=log, route=route
+        host="127.0.0.1",
+        port=_free_port(),
+        data_dirs=[extra],
+        log=log,
+        route=route,
+        max_upload_bytes=UPLOAD_LIMIT,
     )
     try:
         assert controller.wait_idle(240), "the sample did not load"
@@ -249,14 +259,57 @@ def test_two_tabs_keep_their_own_time(browser, inspector, page):
         pg2.close()
 
 
-def test_a_failing_open_keeps_the_session(page, inspector, tmp_path):
-    pg, _ = page
+def _notified(page, text: str) -> bool:
+    return text in page.inner_text("body")
+
+
+def test_a_failing_open_from_the_picker_keeps_the_session(page, inspector):
+    pg, view = page
     _, controller, _ = inspector
     before = controller.session
-    bad = tmp_path / "broken.mcap"
-    bad.write_bytes(b"this is not an mcap file")
-    controller.open(bad, before.route_path)
-    assert controller.wait_idle(30)
-    assert controller.session is before
-    _wait(lambda: "Kept the previous session" in pg.inner_text("body"), 10, "the notification")
+    pg.get_by_role("tab", name="Files").click()
+    view.log_choice.value = "extra0/broken.mcap"  # what picking it in the dropdown does
+    _click(pg, "open")
+    _wait(lambda: _notified(pg, "Kept the previous session"), 30, "the notification")
     assert "broken.mcap" in pg.inner_text("body")
+    assert controller.wait_idle(30) and controller.session is before
+    _click(pg, "next ›")  # still usable
+    _wait(lambda: "frame" in pg.inner_text("body"), 5, "the frame label")
+
+
+def test_save_parameters_downloads_toml_that_loads_back(page, inspector, tmp_path):
+    from estimator.params import load_params
+
+    pg, _ = page
+    _, controller, _ = inspector
+    pg.get_by_role("tab", name="Parameters").click()
+    with pg.expect_download(timeout=20_000) as info:
+        _click(pg, "save parameters")
+    path = tmp_path / info.value.suggested_filename
+    info.value.save_as(path)
+    assert path.name.endswith(".toml")
+    assert load_params(path) == controller.params
+    assert controller.params.gates.min_pairs == 500
+
+
+def test_upload_a_route_and_refuse_an_oversized_file(page, inspector, tmp_path):
+    pg, view = page
+    _, controller, _ = inspector
+    pg.get_by_role("tab", name="Files").click()
+    route = tmp_path / "my_route.geojson"
+    route.write_bytes(controller.session.route_path.read_bytes())
+    with pg.expect_file_chooser() as chooser:
+        _click(pg, "upload route")
+    chooser.value.set_files(str(route))
+    _wait(lambda: _notified(pg, "press 'open' to load it"), 30, "the upload")
+    assert any(n.endswith("my_route.geojson") for n in view.route_choice.options)
+    uploaded = [p for p in controller.uploads.path.iterdir() if p.name.endswith("my_route.geojson")]
+    assert len(uploaded) == 1 and uploaded[0].read_bytes() == route.read_bytes()
+
+    big = tmp_path / "big.mcap"
+    big.write_bytes(b"\0" * (UPLOAD_LIMIT + 1))
+    with pg.expect_file_chooser() as chooser:
+        _click(pg, "upload log")
+    chooser.value.set_files(str(big))
+    _wait(lambda: _notified(pg, "exceeds the limit"), 30, "the refusal")
+    assert not any(p.name.endswith("big.mcap") for p in controller.uploads.path.iterdir())
