@@ -16,6 +16,7 @@ COMMANDS = (
     "estimator.commands.run",
     "estimator.commands.simulate",
     "inspector.commands.serve",
+    "inspector.commands.export",
 )
 
 
