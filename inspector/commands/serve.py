@@ -116,8 +116,6 @@ def start(
     from ..controller import Controller, DataFolders, UploadFolder
 
     roots = [SAMPLE_LOGS, *data_dirs]
-    if log is not None:
-        roots.append(log.parent)
     for d in data_dirs:
         if not Path(d).is_dir():
             raise RoutefuseError(d, "--data-dir is not a folder")
@@ -170,6 +168,22 @@ def execute(args: argparse.Namespace) -> int:
     shown = "127.0.0.1" if args.host in ("0.0.0.0", "::") else args.host
     print(f"routefuse inspector: http://{shown}:{server.get_port()}  (Ctrl+C to stop)", flush=True)
     print(f"loading {log.name} with route {route.name} ...", flush=True)
+
+    def loaded(session) -> None:
+        tl = session.timeline
+        rejected = int((~tl.match_accepted).sum())
+        print(
+            f"loaded {session.log_name}: {tl.duration:.0f} s, {tl.n_frames} frames, "
+            f"{len(tl.match_t)} match attempts ({rejected} rejected)",
+            flush=True,
+        )
+
+    controller.subscribe(
+        on_session=loaded,
+        on_error=lambda exc: print(f"routefuse: error: {exc}", file=sys.stderr, flush=True),
+    )
+    if controller.session is not None and not controller.busy:
+        loaded(controller.session)
     try:
         while True:
             time.sleep(3600)

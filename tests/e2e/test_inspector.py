@@ -178,6 +178,18 @@ def test_step_frames_with_buttons_and_keys(page):
     _wait(lambda: _canvas(pg) != before, 10, "the rendered scene to change")
 
 
+def test_play_and_pause(page):
+    pg, view = page
+    f0 = _frame(pg)
+    _click(pg, "play")
+    _wait(lambda: _frame(pg) > f0 + 20, 20, "playback to advance")
+    _click(pg, "pause")
+    _wait(lambda: not view.playhead.playing, 5, "the pause")
+    f1 = _frame(pg)
+    time.sleep(1.0)
+    assert _frame(pg) == f1
+
+
 def test_parameter_slider_reruns_and_changes_metrics(page, inspector):
     pg, _ = page
     _, controller, _ = inspector
