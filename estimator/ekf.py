@@ -60,7 +60,13 @@ A_N_RESETS = 33
 A_STILL_SINCE = 34  # start of the current stationary stretch, or -1
 A_GYRO_SUM = 35  # (3) gyro sum over the stationary stretch since the last ZUPT
 A_GYRO_N = 38
-NA = 40
+A_TRUST_T = 40  # time of the last trusted fix
+A_CHAIN_T0 = 46  # start of the current run of mutually consistent fixes
+A_CHAIN_T = 47  # the run's last fix: time, E, N, DR E, DR N
+A_CHAIN_POS = 48  # (2)
+A_CHAIN_DR = 50  # (2)
+A_N_GNSS_SUSPECT = 52
+NA = 56
 
 # idx
 I_IMU, I_WHEEL, I_GNSS, I_OUT, NI = 0, 1, 2, 3, 4
@@ -88,7 +94,18 @@ C_WHEEL_GAP = 22  # wheel samples further apart than this are not interpolated
 C_TAU_W = 23  # GNSS wander correlation time
 C_QW_H = 24  # GNSS wander driving PSD, horizontal
 C_QW_V = 25
-NC = 26
+C_ROBUST = 26  # test fixes against the dead-reckoned motion
+C_WHITE_VAR = 27  # typical white variance of a horizontal fix coordinate
+C_WANDER_VAR = 28  # GNSS wander variance, horizontal
+NC = 32
+
+PROBATION_GAP_S = 2.0
+"""After this long without a trusted fix, new fixes are on probation (see _robust_check)."""
+AGREE_S = 3.0
+"""Fixes on probation are used once they have agreed with each other for this long."""
+CHAIN_GAP_S = 1.0
+CHAIN_GATE = 9.0
+"""Chi-square (2 dof) of the motion between consecutive fixes against the DR motion."""
 
 # output rows
 O_T = 0
@@ -473,15 +490,48 @@ def _widen_position(P, y, S):
 
 
 @njit(cache=True, error_model="numpy")
+def _robust_check(aux, cfg, t_fix, e, n, dr_e, dr_n, nis_typical):
+    """Robust GNSS: is a fix trusted? Returns 0 (use it as it is), 1 (it disagrees with the
+    filter: inflate its covariance by its innovation) or -1 (on probation: do not use it).
+
+    ``nis_typical`` is the horizontal innovation tested against the filter's covariance plus
+    the *typical* white variance of the log's fixes, not the variance the fix reports: at tunnel
+    portals receivers report metre-level sigmas for jumps of 5-15 m. Fixes are also chained by
+    the dead-reckoned motion between consecutive fixes (good to centimetres over a fraction of a
+    second): after a gap of more than PROBATION_GAP_S (an outage) fixes are not used until they
+    have agreed with each other for AGREE_S, and a chain that agrees that long is trusted even
+    if it disagrees with the filter (then the filter was wrong)."""
+    ct = aux[A_CHAIN_T]
+    chain_ok = False
+    if ct > 0 and t_fix - ct <= CHAIN_GAP_S:
+        de = e - (aux[A_CHAIN_POS] + dr_e - aux[A_CHAIN_DR])
+        dn = n - (aux[A_CHAIN_POS + 1] + dr_n - aux[A_CHAIN_DR + 1])
+        chain_ok = (de * de + dn * dn) / (2.0 * cfg[C_WHITE_VAR]) <= CHAIN_GATE
+    if not chain_ok:
+        aux[A_CHAIN_T0] = t_fix
+    aux[A_CHAIN_T] = t_fix
+    aux[A_CHAIN_POS], aux[A_CHAIN_POS + 1] = e, n
+    aux[A_CHAIN_DR], aux[A_CHAIN_DR + 1] = dr_e, dr_n
+    chain_long = t_fix - aux[A_CHAIN_T0] >= AGREE_S
+    probation = t_fix - aux[A_TRUST_T] > PROBATION_GAP_S
+    if chain_long or (not probation and nis_typical <= cfg[C_GNSS_GATE]):
+        aux[A_TRUST_T] = t_fix
+        return 0
+    aux[A_N_GNSS_SUSPECT] += 1
+    return -1 if probation else 1
+
+
+@njit(cache=True, error_model="numpy")
 def _gnss_update(x, P, aux, cfg, t, t_fix, pos, var, C, H, y, R, PHt, S, Si):
-    """One fix: antenna lever arm, the fix moved to the state time with the velocity, separate
-    chi-square gates on horizontal and vertical innovations. Returns 1 if the fix was used."""
+    """One fix: antenna lever arm, the fix moved to the state time with the velocity, the
+    motion check (robust GNSS), separate chi-square gates on horizontal and vertical
+    innovations. Returns 1 if the fix was used."""
+    dtf = t - t_fix
     quat_to_dcm(x[X_QUAT : X_QUAT + 4], C)
     lv = cfg[C_LEVER : C_LEVER + 3]
     la = np.empty(3)
     for i in range(3):
         la[i] = C[i, 0] * lv[0] + C[i, 1] * lv[1] + C[i, 2] * lv[2]
-    dtf = t - t_fix
     for a in range(3):
         for j in range(NE):
             H[a, j] = 0.0
@@ -498,6 +548,20 @@ def _gnss_update(x, P, aux, cfg, t, t_fix, pos, var, C, H, y, R, PHt, S, Si):
     H[1, 2] = la[0]
     H[2, 0] = la[1]
     H[2, 1] = -la[0]
+    if cfg[C_ROBUST] > 0:
+        R[0, 0] = R[1, 1] = cfg[C_WHITE_VAR]
+        _innovation_cov(P, H, R, 2, PHt, S, Si)
+        nis_typical = _nis(y, Si, 2)
+        R[0, 0], R[1, 1] = var[0], var[1]
+        # the antenna on the DR track at the fix time
+        dr_e = aux[A_DR] - x[X_VEL] * dtf + la[0]
+        dr_n = aux[A_DR + 1] - x[X_VEL + 1] * dtf + la[1]
+        verdict = _robust_check(aux, cfg, t_fix, pos[0], pos[1], dr_e, dr_n, nis_typical)
+        if verdict < 0:
+            return 0
+        if verdict > 0:
+            R[0, 0] += y[0] * y[0]
+            R[1, 1] += y[1] * y[1]
     _innovation_cov(P, H, R, 3, PHt, S, Si)
     gate = cfg[C_GNSS_GATE]
     widen = aux[A_INFLATE] > 0

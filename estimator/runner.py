@@ -191,7 +191,8 @@ def run(
 
 def _filter_key(p: Params) -> tuple:
     """Everything the filter itself (not the matcher) depends on."""
-    return (p.noise, p.sensors, p.extensions.wheel_scale_state, p.output_rate_hz)
+    ext = p.extensions
+    return (p.noise, p.sensors, ext.wheel_scale_state, ext.robust_gnss, p.output_rate_hz)
 
 
 def _frame_of(log: Log) -> LocalFrame:
@@ -286,6 +287,7 @@ def _prepare(
     wander[:2] = wander[:2].mean()
     gnss_var = np.ascontiguousarray(np.maximum(gnss_var - wander, [h_floor, h_floor, 4 * h_floor]))
     cfg[ekf.C_TAU_W] = n.gnss_wander_tau_s
+    cfg[ekf.C_WHITE_VAR] = float(np.median(gnss_var[:, :2]))
     cfg[ekf.C_QW_H] = 2 * wander[0] / n.gnss_wander_tau_s
     cfg[ekf.C_QW_V] = 2 * wander[2] / n.gnss_wander_tau_s
     x0, P0, k0, t_fix = _align(
@@ -304,6 +306,7 @@ def _prepare(
     aux0[ekf.A_NEXT_OUT] = t_init
     aux0[ekf.A_REJECT_SINCE] = -1.0
     aux0[ekf.A_DR : ekf.A_DR + 2] = x0[:2]
+    aux0[ekf.A_TRUST_T] = t_fix
     aux0[ekf.A_PREV_GYRO : ekf.A_PREV_GYRO + 3] = gyro[k0]
     aux0[ekf.A_PREV_ACCEL : ekf.A_PREV_ACCEL + 3] = accel[k0]
     idx0 = np.zeros(ekf.NI, np.int64)
@@ -352,6 +355,7 @@ def _config(p: Params, frame: LocalFrame, wheel_t: F64) -> F64:
     cfg[ekf.C_AID_DT] = 1.0 / n.aid_rate_hz
     cfg[ekf.C_SCALE_ON] = float(p.extensions.wheel_scale_state and len(wheel_t) > 0)
     cfg[ekf.C_RESET_S] = n.gnss_reset_after_s
+    cfg[ekf.C_ROBUST] = float(p.extensions.robust_gnss)
     gap = float(np.median(np.diff(wheel_t))) if len(wheel_t) > 1 else 0.0
     cfg[ekf.C_WHEEL_GAP] = max(0.5, 5 * gap)
     return cfg
