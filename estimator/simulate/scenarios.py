@@ -51,8 +51,8 @@ def long_tunnel() -> Scenario:
     )
     return Scenario(
         name="long_tunnel",
-        description="7.5 km almost straight expressway tunnel at 79 km/h after 100 s of open "
-        "sky with turns; the paper's long-tunnel case, DR drifts by hundreds of metres",
+        description="7.8 km almost straight expressway tunnel at 79 km/h after 107 s of open "
+        "sky with turns; the paper's long-tunnel case (DR drift of 100+ m)",
         pieces=pieces,
         origin=(40.12, 115.21, 620.0),
         heading0_deg=20.0,
@@ -75,7 +75,7 @@ def spiral_tunnel() -> Scenario:
     )
     return Scenario(
         name="spiral_tunnel",
-        description="3.6 km climbing spiral tunnel (280 deg at R 330 m, 3 % grade, the exit "
+        description="3.7 km climbing spiral tunnel (280 deg at R 330 m, 3 % grade, the exit "
         "passes under the entry) at 61 km/h; the paper's curved-tunnel case",
         pieces=pieces,
         origin=(40.31, 115.47, 780.0),
@@ -107,7 +107,7 @@ def multi_tunnel() -> Scenario:
     )
     return Scenario(
         name="multi_tunnel",
-        description="three tunnels (1.5, 2.0 and 1.3 km) with short open gaps at 79 km/h; the "
+        description="three tunnels (1.5, 2.0 and 1.35 km) with short open gaps at 79 km/h; the "
         "paper's multi-segment case; the receiver is silent in tunnels (no NavSatFix at all)",
         pieces=pieces,
         origin=(39.87, 114.68, 450.0),
@@ -178,7 +178,8 @@ def monaco_tunnel() -> Scenario:
     return Scenario(
         name="monaco_tunnel",
         description="the real Tunnel de Monaco (A 500, 1.6 km, S-bend; OSM geometry smoothed "
-        "with sigma 20 m) at 50 km/h after a 60 s synthetic approach; the route is the raw OSM "
+        "with sigma 20 m) at 50 km/h after 108 s of synthetic approach and OSM lead-in; the "
+        "route is the raw OSM "
         "polyline (segments up to 512 m) plus the mapped approach and exit; silent receiver",
         pieces=pieces,
         origin=(lat0, lon0, h0),
