@@ -103,6 +103,9 @@ PROBATION_GAP_S = 2.0
 """After this long without a trusted fix, new fixes are on probation (see _robust_check)."""
 AGREE_S = 3.0
 """Fixes on probation are used once they have agreed with each other for this long."""
+ZUPT_MAX_SPEED = 1.0
+"""m/s: a stop is only believed when the filter has slowed down to it (a vehicle cruising on a
+smooth road at constant speed looks as still to the IMU as a parked one)."""
 CHAIN_GAP_S = 1.0
 CHAIN_GATE = 9.0
 """Chi-square (2 dof) of the motion between consecutive fixes against the DR motion."""
@@ -791,7 +794,8 @@ def run_until(
         if t - aux[A_LAST_AID] >= cfg[C_AID_DT] - 1e-9:
             aux[A_LAST_AID] = t
             _flush(P, aux, cfg, FA, FB, FC, FF)
-            if still[k]:
+            speed2 = x[X_VEL] * x[X_VEL] + x[X_VEL + 1] * x[X_VEL + 1] + x[X_VEL + 2] * x[X_VEL + 2]
+            if still[k] and speed2 < ZUPT_MAX_SPEED * ZUPT_MAX_SPEED:
                 _zupt_update(x, P, aux, cfg, H, y, R, PHt, S, Si)
                 aux[A_N_ZUPT] += 1
             else:

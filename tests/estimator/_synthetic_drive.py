@@ -14,17 +14,49 @@ FRAME = LocalFrame(48.0, 11.0, 500.0)
 T0 = 1.7e9
 
 
+def _stop_factor(t, stop, ramp=4.0):
+    """1 while driving, 0 while stopped, cosine ramps of ``ramp`` s; and its derivative."""
+    g = np.ones_like(t)
+    gd = np.zeros_like(t)
+    if stop is None:
+        return g, gd
+    s0, s1 = stop
+    down = (t >= s0 - ramp) & (t < s0)
+    x = np.pi * (t[down] - (s0 - ramp)) / ramp
+    g[down] = 0.5 * (1 + np.cos(x))
+    gd[down] = -0.5 * np.sin(x) * np.pi / ramp
+    g[(t >= s0) & (t <= s1)] = 0.0
+    up = (t > s1) & (t < s1 + ramp)
+    x = np.pi * (t[up] - s1) / ramp
+    g[up] = 0.5 * (1 - np.cos(x))
+    gd[up] = 0.5 * np.sin(x) * np.pi / ramp
+    return g, gd
+
+
 def kinematics(
-    t, *, speed: float = 12.0, yaw_amp: float = 0.8, yaw_period: float = 60.0
+    t,
+    *,
+    speed: float = 12.0,
+    yaw_amp: float = 0.8,
+    yaw_period: float = 60.0,
+    stop: tuple[float, float] | None = None,
 ) -> tuple[np.ndarray, np.ndarray, np.ndarray, np.ndarray]:
-    """yaw, yaw rate, speed, acceleration at times ``t`` (s after the drive start)."""
+    """yaw, yaw rate, speed, acceleration at times ``t`` (s after the drive start). ``stop``:
+    (start, end) of a standstill, entered and left with 4 s ramps (turning stops too)."""
+    t = np.asarray(t, np.float64)
     w = 2 * np.pi / yaw_period
     ws = 2 * np.pi / 37.0
-    yaw = 0.3 + yaw_amp * np.sin(w * t)
     yaw_rate = yaw_amp * w * np.cos(w * t)
     v = speed * (1 + 0.2 * np.sin(ws * t))
     v_dot = speed * 0.2 * ws * np.cos(ws * t)
-    return yaw, yaw_rate, v, v_dot
+    if stop is None:
+        return 0.3 + yaw_amp * np.sin(w * t), yaw_rate, v, v_dot
+    g, gd = _stop_factor(t, stop)
+    tf = np.arange(0.0, float(np.max(t)) + 1.0, 1e-3)
+    gf, _ = _stop_factor(tf, stop)
+    rate_f = yaw_amp * w * np.cos(w * tf) * gf
+    yaw_f = 0.3 + np.r_[0.0, np.cumsum(0.5 * (rate_f[1:] + rate_f[:-1]) * 1e-3)]
+    return np.interp(t, tf, yaw_f), yaw_rate * g, v * g, v_dot * g + v * gd
 
 
 def drive(
@@ -46,6 +78,7 @@ def drive(
     wheel_sigma: float = 0.0,
     wheel_scale: float = 1.0,
     with_wheel: bool = True,
+    stop: tuple[float, float] | None = None,
 ) -> tuple[Log, np.ndarray, np.ndarray]:
     """(log, truth times, truth ENU positions (N, 3)). Yaw = yaw_amp * sin(2 pi t / period),
     speed = speed * (1 + 0.2 sin(2 pi t / 37))."""
@@ -54,7 +87,7 @@ def drive(
     tf = np.arange(0.0, duration + 1.0, fine_dt)
 
     def kin(t):
-        return kinematics(t, speed=speed, yaw_amp=yaw_amp, yaw_period=yaw_period)
+        return kinematics(t, speed=speed, yaw_amp=yaw_amp, yaw_period=yaw_period, stop=stop)
 
     yaw_f, _, v_f, _ = kin(tf)
     ve, vn = v_f * np.cos(yaw_f), v_f * np.sin(yaw_f)

@@ -306,3 +306,26 @@ def test_comma_bag_baseline_and_proposed_with_an_outage():
 
     assert rmse(base) < 20.0
     assert rmse(prop) < rmse(base)
+
+
+@pytest.mark.parametrize("with_wheel", [True, False])
+def test_a_stop_in_an_outage_is_held_by_zero_velocity_updates(with_wheel):
+    log, _, _ = drive(duration=110.0, stop=(50.0, 70.0), with_wheel=with_wheel)
+    r = run(log, None, Params(), method="baseline", frame=FRAME, outages=[(40.0, 95.0)])
+    e = r.epochs
+    rel = e.t - r.t0
+    stopped = (rel > 51.0) & (rel < 69.0)
+    assert np.linalg.norm(e.velocity[stopped], axis=1).max() < 0.01
+    err = np.linalg.norm(e.position[:, :2] - _truth_en(log, FRAME, e.t), axis=1)
+    assert err[stopped].max() - err[stopped].min() < 0.05  # no drift while parked
+    assert err[e.degraded].max() < 1.0  # 55 s without GNSS, perfect sensors
+
+
+def test_cruising_without_wheel_speed_is_not_taken_for_a_stop():
+    """A noise-free IMU on a smooth road looks as still as a parked car when the yaw rate
+    crosses zero: the stop must not be believed while the filter is moving."""
+    log, _, _ = drive(duration=60.0, with_wheel=False)
+    r = run(log, None, Params(), method="baseline", frame=FRAME, outages=[(10.0, 55.0)])
+    err = np.linalg.norm(r.epochs.position[:, :2] - _truth_en(log, FRAME, r.epochs.t), axis=1)
+    # 45 s of IMU + NHC after 9 s of GNSS: 2 m measured; a false stop costs tens of metres
+    assert err.max() < 5.0
