@@ -29,6 +29,8 @@ ROUTE_COLOR = "#787878"
 TRUTH_COLOR = "#1e963c"
 OUTAGE_COLOR = "#dc3232"
 DPI = 150
+ZOOM_MIN_HALF_M = 60.0
+"""the zoom panel shows at least 120 m: the lane, the route and a stretch of both tracks"""
 _SVG_META = {"Date": None}
 """no timestamp in the SVG, so an unchanged export gives an identical file"""
 
@@ -78,28 +80,30 @@ def deviation_figure(plot: DeviationPlot, method: str = "proposed") -> Figure:
     return fig
 
 
-def _outage_box(
+def _zoom_box(
     scene: SceneData, intervals: Sequence[tuple[float, float]]
-) -> tuple[F64, F64] | None:
-    """A square (lo, hi) around everything drawn during the longest outage, padded; None when
-    the run has no outage."""
+) -> tuple[F64, F64, float] | None:
+    """A square (lo, hi) around where the baseline is farthest from the compared run during the
+    longest outage, large enough to show both tracks and the route there, and that distance;
+    None when the run has no outage."""
     if not intervals:
         return None
     a, b = max(intervals, key=lambda iv: iv[1] - iv[0])
-    pts = []
-    for track in (scene.proposed, scene.baseline, scene.truth):
-        if track is None:
-            continue
-        m = (track.t >= a) & (track.t <= b)
-        pts.append(track.xy[m])
-    xy = np.vstack(pts) if pts else np.zeros((0, 2))
-    xy = xy[np.all(np.isfinite(xy), axis=1)]
-    if len(xy) < 2:
+    prop, base = scene.proposed, scene.baseline
+    m = (prop.t >= a) & (prop.t <= b)
+    if m.sum() < 2 or len(base.t) < 2:
         return None
-    lo, hi = xy.min(axis=0), xy.max(axis=0)
-    half = 0.54 * float(np.max(hi - lo)) + 20.0
-    mid = (lo + hi) / 2
-    return mid - half, mid + half
+    t = prop.t[m]
+    p = prop.xy[m]
+    q = np.column_stack([np.interp(t, base.t, base.xy[:, 0]), np.interp(t, base.t, base.xy[:, 1])])
+    gap = np.hypot(*(q - p).T)
+    ok = np.isfinite(gap)
+    if not ok.any():
+        return None
+    k = int(np.argmax(np.where(ok, gap, -1.0)))
+    mid = (p[k] + q[k]) / 2
+    half = max(0.75 * float(gap[k]) + 20.0, ZOOM_MIN_HALF_M)
+    return mid - half, mid + half, float(gap[k])
 
 
 def _draw_map(ax: Any, scene: SceneData, method: str, *, adjustable: str = "datalim") -> None:
@@ -114,8 +118,8 @@ def _draw_map(ax: Any, scene: SceneData, method: str, *, adjustable: str = "data
     ax.plot(*scene.proposed.line.T, color=PROPOSED_COLOR, lw=1.3, label=method)
     if len(scene.match_xy):
         ok = scene.match_accepted
-        ax.scatter(*scene.match_xy[ok].T, s=9, color="#1eaa3c", zorder=5, label="accepted")
-        ax.scatter(*scene.match_xy[~ok].T, s=9, color="#dc2828", zorder=5, label="rejected")
+        ax.scatter(*scene.match_xy[ok].T, s=6, color="#1eaa3c", zorder=1.5, label="accepted")
+        ax.scatter(*scene.match_xy[~ok].T, s=6, color="#dc2828", zorder=1.5, label="rejected")
     ax.set_aspect("equal", adjustable=adjustable)
     ax.set_xlabel("east [m]")
     ax.set_ylabel("north [m]")
@@ -126,21 +130,22 @@ def trajectory_figure(
     scene: SceneData, intervals: Sequence[tuple[float, float]], method: str = "proposed"
 ) -> Figure:
     """The trajectories over the route (local ENU metres); with an outage, a second panel
-    zoomed on the longest one and its extent marked on the overview."""
-    box = _outage_box(scene, intervals)
+    zoomed where the baseline drifted farthest in the longest one, its extent marked on the
+    overview."""
+    box = _zoom_box(scene, intervals)
     fig = Figure(figsize=(13, 6) if box is not None else (8, 7), layout="constrained")
     axes = fig.subplots(1, 2) if box is not None else [fig.subplots()]
     _draw_map(axes[0], scene, method)
     axes[0].set_title("Trajectories over the route")
     axes[0].legend(loc="best", fontsize="small")
     if box is not None:
-        lo, hi = box
+        lo, hi, gap = box
         zoom = axes[1]
         _draw_map(zoom, scene, method, adjustable="box")
         zoom.set_xlim(lo[0], hi[0])
         zoom.set_ylim(lo[1], hi[1])
         a, b = max(intervals, key=lambda iv: iv[1] - iv[0])
-        zoom.set_title(f"Longest GNSS outage ({b - a:.0f} s)")
+        zoom.set_title(f"Largest baseline drift in the longest outage ({b - a:.0f} s): {gap:.1f} m")
         axes[0].add_patch(
             Rectangle(tuple(lo), *(hi - lo), fill=False, ec="k", lw=0.8, ls=":", zorder=6)
         )
