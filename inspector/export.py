@@ -137,6 +137,7 @@ def export_log(
     log_path, route_path, out = Path(log_path), Path(route_path), Path(out_dir)
     params = params or Params()
     _check_replay_options(replay)
+    _make_dir(out)  # before the runs: a bad --out fails at once
     report = progress or (lambda stage, fraction: None)
     timings: dict[str, float] = {}
     clock = time.perf_counter()
@@ -178,30 +179,33 @@ def export_log(
         reuse=baseline,
     )
     lap("run_s")
-    _make_dir(out)
-    report("tables", 0.55)
-    doc = export_tables.metrics_document(
-        inputs, baseline, compared, log_path, route_path, outages=outages
-    )
-    files = export_tables.write_tables(out, inputs, baseline, compared, doc)
-    lap("tables_s")
-    report("figures", 0.65)
-    scene = SceneData.build(
-        baseline=baseline, proposed=compared, route=inputs.route, log=inputs.log
-    )
-    files += export_figures.write_figures(out, inputs, baseline, compared, scene)
-    lap("figures_s")
-    frames = replay_times(scene, replay)
-    files += write_replay(
-        out,
-        scene,
-        frames,
-        degraded=compared.degraded_intervals,
-        time_lapse=_time_lapse(frames, replay),
-        progress=stage("replay", 0.75, 0.98),
-    )
-    lap("replay_s")
-    files += (export_tables.write_report(out, doc, files, timings),)
+    try:
+        report("tables", 0.55)
+        doc = export_tables.metrics_document(
+            inputs, baseline, compared, log_path, route_path, outages=outages
+        )
+        files = export_tables.write_tables(out, inputs, baseline, compared, doc)
+        lap("tables_s")
+        report("figures", 0.65)
+        scene = SceneData.build(
+            baseline=baseline, proposed=compared, route=inputs.route, log=inputs.log
+        )
+        files += export_figures.write_figures(out, inputs, baseline, compared, scene)
+        lap("figures_s")
+        frames = replay_times(scene, replay)
+        files += write_replay(
+            out,
+            scene,
+            frames,
+            degraded=compared.degraded_intervals,
+            time_lapse=_time_lapse(frames, replay),
+            progress=stage("replay", 0.75, 0.98),
+        )
+        lap("replay_s")
+        files += (export_tables.write_report(out, doc, files, timings),)
+    except OSError as exc:
+        where = exc.filename or out
+        raise RoutefuseError(where, f"cannot write: {exc.strerror or exc}") from None
     report("done", 1.0)
     return ExportResult(
         log=log_path,

@@ -443,6 +443,36 @@ def _fmt(v: Any, digits: int = 3) -> str:
     return f"{v:.{digits}f}" if isinstance(v, float) else html.escape(str(v))
 
 
+def _title(key: str) -> str:
+    """``rmse_pos_dev_m`` -> ``rmse pos dev [m]``."""
+    for suffix, unit in (("_deg", "deg"), ("_m", "m")):
+        if key.endswith(suffix):
+            return f"{key.removesuffix(suffix).replace('_', ' ')} [{unit}]"
+    return key.replace("_", " ")
+
+
+def _html_table(methods: dict[str, dict[str, Any]], group: str, caption: str) -> str:
+    esc = html.escape
+    keys = next((list(m[group]) for m in methods.values() if m.get(group)), [])
+    head = "".join(f"<th>{esc(_title(k))}</th>" for k in keys)
+    rows = ""
+    for name, m in methods.items():
+        values = m.get(group) or {}
+        cells = "".join(f"<td>{_fmt(values.get(k))}</td>" for k in keys)
+        rows += f"<tr><td>{esc(name)}</td>{cells}</tr>\n"
+    return (
+        f"<table><caption>{esc(caption)}</caption>\n"
+        f"<tr><th>method</th>{head}</tr>\n{rows}</table>\n"
+    )
+
+
+def _size(n: int) -> str:
+    for unit, scale in (("MB", 1e6), ("kB", 1e3)):
+        if n >= scale:
+            return f"{n / scale:.1f} {unit}"
+    return f"{n} B"
+
+
 def write_report(
     out: Path, doc: dict[str, Any], files: Sequence[Path], timings: dict[str, float]
 ) -> Path:
@@ -450,15 +480,9 @@ def write_report(
     esc = html.escape
     path = out / "report.html"
     methods: dict[str, dict[str, Any]] = doc["methods"]
-    route_keys = list(next(iter(methods.values()))["route"])
-    truth_keys = next((list(m["truth"]) for m in methods.values() if m.get("truth")), [])
-    head = "".join(f"<th>{esc(k)}</th>" for k in ["method", *route_keys, *truth_keys])
-    body = ""
-    for name, m in methods.items():
-        truth = m.get("truth") or {}
-        cells = [m["route"][k] for k in route_keys] + [truth.get(k) for k in truth_keys]
-        body += f"<tr><td>{esc(name)}</td>" + "".join(f"<td>{_fmt(c)}</td>" for c in cells)
-        body += "</tr>\n"
+    tables = _html_table(methods, "route", "Deviation from the route")
+    if any(m.get("truth") for m in methods.values()):
+        tables += _html_table(methods, "truth", "Error against ground truth")
     matches = doc["matches"]
     rejected = ", ".join(f"{esc(k)} {v}" for k, v in matches["rejected"].items()) or "none"
     outages = ", ".join(f"{a:.1f}–{b:.1f} s" for a, b in doc["degraded_intervals"]) or "none"
@@ -467,8 +491,7 @@ def write_report(
         if f.exists():
             size = f.stat().st_size
             links += (
-                f'<li><a href="{esc(f.name)}">{esc(f.name)}</a> '
-                f"<small>{size / 1024:.0f} kB</small></li>\n"
+                f'<li><a href="{esc(f.name)}">{esc(f.name)}</a> <small>{_size(size)}</small></li>\n'
             )
     timing = ", ".join(f"{k.removesuffix('_s')} {v:.1f} s" for k, v in timings.items())
     page = f"""<!DOCTYPE html>
@@ -476,7 +499,8 @@ def write_report(
 <title>routefuse: {esc(Path(doc["log"]).name)}</title>
 <style>
 body {{ font-family: system-ui, sans-serif; margin: 2em auto; max-width: 1100px; color: #222; }}
-table {{ border-collapse: collapse; }}
+table {{ border-collapse: collapse; margin-bottom: 1em; }}
+caption {{ text-align: left; font-weight: 600; padding: 0.3em 0; }}
 th, td {{ border: 1px solid #ccc; padding: 0.3em 0.6em; text-align: right; }}
 th:first-child, td:first-child {{ text-align: left; }}
 img {{ max-width: 100%; border: 1px solid #eee; }}
@@ -488,9 +512,7 @@ img {{ max-width: 100%; border: 1px solid #eee; }}
 <p><a href="replay.html"><b>Open the 3D replay</b></a> (play, pause, scrub;
 <code>replay.viser</code> for viser's own player)</p>
 <h2>Metrics over the GNSS-degraded intervals</h2>
-<table><tr>{head}</tr>
-{body}</table>
-<p>Match attempts: {matches["attempted"]}, accepted {matches["accepted"]};
+{tables}<p>Match attempts: {matches["attempted"]}, accepted {matches["accepted"]};
 rejected by first failed gate: {rejected}.</p>
 <h2>Deviation from the route</h2>
 <img src="deviation.svg" alt="position and heading deviation against time">

@@ -242,7 +242,9 @@ def test_report_links_every_file(exported):
     assert links >= EXPECTED - {"report.html"}
     assert all((result.out_dir / link).exists() for link in links)
     assert 'src="deviation.svg"' in page and 'src="trajectory.png"' in page
-    assert "rmse_pos_dev_m" in page
+    rmse = result.metrics["methods"]["proposed"]["route"]["rmse_pos_dev_m"]
+    assert "rmse pos dev [m]" in page and f"<td>{rmse:.3f}</td>" in page
+    assert "Error against ground truth" in page
 
 
 def _scene(n_matches: int) -> SceneData:

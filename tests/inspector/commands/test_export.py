@@ -105,3 +105,12 @@ def test_missing_log(tmp_path, capsys):
     code = main(["export", str(tmp_path / "nope.mcap"), "--route", "r.geojson", "--out", "o"])
     assert code == 2
     assert "nope.mcap: no such file" in capsys.readouterr().err
+
+
+def test_output_folder_that_is_a_file(bag, tmp_path, capsys):
+    log, route = bag
+    out = tmp_path / "taken"
+    out.write_text("not a folder")
+    assert main(["export", str(log), "--route", str(route), "--out", str(out)]) == 2
+    err = capsys.readouterr().err.strip().splitlines()
+    assert err[-1].startswith(f"routefuse: error: {out}: cannot create the output folder")
