@@ -186,7 +186,7 @@ def execute(args: argparse.Namespace) -> int:
         loaded(controller.session)
     try:
         while True:
-            time.sleep(3600)
+            time.sleep(0.5)
     except KeyboardInterrupt:
         pass
     finally:
