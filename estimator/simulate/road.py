@@ -18,6 +18,8 @@ from typing import Literal
 
 import numpy as np
 from numpy.typing import ArrayLike, NDArray
+from scipy import sparse
+from scipy.sparse.linalg import spsolve
 
 from ..errors import ConfigError
 
@@ -418,15 +420,56 @@ def _fit_curvature(lengths: F64, dpsi: F64) -> F64:
     """Knot curvatures of a clothoid chain whose heading at every knot (``dpsi``, relative to
     the first) matches in the least-squares sense, with a small curvature-smoothness term and
     zero curvature at both ends (so the chain joins straights). Matching knot headings, not
-    local curvatures, keeps the chain from drifting sideways."""
+    local curvatures, keeps the chain from drifting sideways.
+
+    Unknowns are the knot headings and curvatures; the chain's heading increments are tied to
+    the curvatures by heavily weighted equations, so the system stays banded (O(n))."""
     n = len(lengths)
-    b = np.zeros((n, n + 1))
-    idx = np.arange(n)
-    b[idx, idx] = b[idx, idx + 1] = 0.5 * lengths
-    a = np.cumsum(b, axis=0)
-    d = np.zeros((n, n + 1))
-    d[idx, idx], d[idx, idx + 1] = -1.0, 1.0
+    rows: list[NDArray[np.intp]] = []
+    cols: list[NDArray[np.intp]] = []
+    vals: list[F64] = []
+    rhs: list[F64] = []
+    m = np.arange(n)
+    tie = 1e3
+    # unknowns: h_1..h_n (h_0 = 0) at columns 0..n-1, kappa_1..kappa_{n-1} at n..2n-2
+    h = lambda i: i - 1  # noqa: E731
+    k = lambda i: n + i - 1  # noqa: E731
+    r = 0
+    # 1. headings match the data
+    rows.append(r + m)
+    cols.append(h(m + 1))
+    vals.append(np.ones(n))
+    rhs.append(dpsi[1:])
+    r += n
+    # 2. h_{i+1} - h_i - (kappa_i + kappa_{i+1}) L_i / 2 = 0, kappa_0 = kappa_n = 0, h_0 = 0
+    for i in range(n):
+        entries = [(h(i + 1), tie)]
+        if i > 0:
+            entries += [(h(i), -tie), (k(i), -tie * 0.5 * lengths[i])]
+        if i + 1 < n:
+            entries.append((k(i + 1), -tie * 0.5 * lengths[i]))
+        rows.append(np.full(len(entries), r))
+        cols.append(np.array([c for c, _ in entries]))
+        vals.append(np.array([v for _, v in entries]))
+        r += 1
+    rhs.append(np.zeros(n))
+    # 3. smooth curvature: w (kappa_{i+1} - kappa_i) = 0 for i = 0..n-1
     weight = 0.1 * float(np.mean(lengths))
-    lhs = np.vstack([a, weight * d])[:, 1:-1]
-    rhs = np.r_[dpsi[1:], np.zeros(n)]
-    return np.r_[0.0, np.linalg.lstsq(lhs, rhs, rcond=None)[0], 0.0]
+    for i in range(n):
+        entries = []
+        if i + 1 < n:
+            entries.append((k(i + 1), weight))
+        if i > 0:
+            entries.append((k(i), -weight))
+        if entries:
+            rows.append(np.full(len(entries), r))
+            cols.append(np.array([c for c, _ in entries]))
+            vals.append(np.array([v for _, v in entries]))
+        r += 1
+    rhs.append(np.zeros(n))
+    a = sparse.csr_matrix(
+        (np.concatenate(vals), (np.concatenate(rows), np.concatenate(cols))),
+        shape=(r, 2 * n - 1),
+    )
+    x = spsolve((a.T @ a).tocsc(), a.T @ np.concatenate(rhs))
+    return np.r_[0.0, x[n:], 0.0]
