@@ -590,7 +590,10 @@ class _Driver:
             t_now = self.aux[ekf.A_TIME]
             target = t_stop
             if self.progress is not None:
-                target = min(t_stop, t_now + _CHUNK_S)
+                # from the next IMU sample: a gap longer than a chunk must not stall the loop
+                k = int(self.idx[ekf.I_IMU])
+                t_next = float(inp.imu_t[k]) if k < len(inp.imu_t) else t_now
+                target = min(t_stop, max(t_now, t_next) + _CHUNK_S)
             status = ekf.run_until(
                 target,
                 self.x,
