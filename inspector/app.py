@@ -144,7 +144,7 @@ class ClientView:
         self.step_buttons = gui.add_button_group("frame", ("« 10", "‹ prev", "next ›", "10 »"))
         self.step_buttons.on_click(self._on_step)
         self.match_buttons = gui.add_button_group(
-            "match", ("‹ attempt", "attempt ›", "next rejected ›")
+            "match", ("‹ attempt", "attempt ›", "‹ rejected", "next rejected ›")
         )
         self.match_buttons.on_click(self._on_match_nav)
         self.play_button = gui.add_button("play", hint="play / pause (space)")
@@ -156,6 +156,10 @@ class ClientView:
         self.follow_box.on_update(self._on_follow)
         self.view_button = gui.add_button("top-down view")
         self.view_button.on_click(lambda _: self.place_camera())
+        gui.add_markdown(
+            "<small>keys: ← → frame · ↑ ↓ ten frames · space play · N / P next / previous "
+            "attempt · R / E next / previous rejected</small>"
+        )
 
         tabs = gui.add_tab_group()
         with tabs.add_tab("Match"):
@@ -280,6 +284,7 @@ class ClientView:
             ("next match attempt", "N", lambda: self.jump("next")),
             ("previous match attempt", "P", lambda: self.jump("previous")),
             ("next rejected attempt", "R", lambda: self.jump("rejected")),
+            ("previous rejected attempt", "E", lambda: self.jump("previous rejected")),
         ]
         for label, key, fn in binds:
             cmd = gui.add_command(label, hotkey=key)
@@ -307,9 +312,12 @@ class ClientView:
         self.step(n)
 
     def _on_match_nav(self, event: viser.GuiEvent) -> None:
-        which = {"‹ attempt": "previous", "attempt ›": "next", "next rejected ›": "rejected"}[
-            self.match_buttons.value
-        ]
+        which = {
+            "‹ attempt": "previous",
+            "attempt ›": "next",
+            "‹ rejected": "previous rejected",
+            "next rejected ›": "rejected",
+        }[self.match_buttons.value]
         self.jump(which)
 
     def _on_speed(self, event: viser.GuiEvent) -> None:
@@ -403,14 +411,14 @@ class ClientView:
             self.render()
 
     def jump(self, which: str) -> None:
-        """Go to the previous / next match attempt, or the next rejected one."""
+        """Go to the previous / next match attempt, or the previous / next rejected one."""
         with self._lock:
             s = self.session
             if s is None:
                 return
             tl = s.timeline
-            if which == "previous":
-                i = tl.previous_match(self.playhead.t)
+            if which.startswith("previous"):
+                i = tl.previous_match(self.playhead.t, rejected_only=which.endswith("rejected"))
             else:
                 i = tl.next_match(self.playhead.t, rejected_only=which == "rejected")
             if i is None:
@@ -418,6 +426,7 @@ class ClientView:
                     "previous": "no earlier match attempt",
                     "next": "no later match attempt",
                     "rejected": "no later rejected attempt",
+                    "previous rejected": "no earlier rejected attempt",
                 }[which]
                 self.client.add_notification("Nothing there", what, auto_close_seconds=4.0)
                 return

@@ -657,15 +657,15 @@ class Controller:
         if base_reuse is not None and base_reuse.params == req.params:
             baseline = base_reuse
         else:
-            baseline = self._runner(
-                inputs, req.params, "baseline", stage(0.5, 0.7, "baseline run"), base_reuse
-            )
+            report = stage(0.5, 0.7, "baseline run")
+            report(0.0)
+            baseline = self._runner(inputs, req.params, "baseline", report, base_reuse)
         timings["baseline_s"] = time.perf_counter() - t1
         t2 = time.perf_counter()
         prop_reuse = prev.proposed if same_inputs and prev and prev.method == req.method else None
-        proposed = self._runner(
-            inputs, req.params, req.method, stage(0.7, 0.95, f"{req.method} run"), prop_reuse
-        )
+        report = stage(0.7, 0.95, f"{req.method} run")
+        report(0.0)
+        proposed = self._runner(inputs, req.params, req.method, report, prop_reuse)
         timings["proposed_s"] = time.perf_counter() - t2
         if self._superseded(req):
             raise Superseded
