@@ -229,6 +229,26 @@ def test_replay_records_the_layers_frame_by_frame(exported):
         if m.get("name") == "/routefuse/proposed/pose" and m["type"] == "SetPositionMessage"
     }
     assert len(pose_updates) >= result.frames - 1  # the vehicle moves in every frame
+    scales = [
+        m["updates"]["scale"]
+        for _, m in messages
+        if m.get("name") == "/routefuse/proposed/pose" and "scale" in m.get("updates", {})
+    ]
+    assert scales and scales[-1] > 5.0  # enlarged to show in the overview
+    # verdict markers appear as the attempts happen, not all at once
+    verdict_nodes = [
+        t
+        for t, m in messages
+        if m.get("name") == "/routefuse/verdicts/markers" and m["type"] == "PointCloudMessage"
+    ]
+    assert len(verdict_nodes) > 3 and verdict_nodes[-1] > verdict_nodes[0]
+    clock = [
+        m["updates"]["text"]
+        for _, m in messages
+        if m.get("name") == "/routefuse/export/clock" and "text" in m.get("updates", {})
+    ]
+    assert "GNSS outage" in " ".join(clock) and clock[0].endswith("attempts 0")
+    assert clock[-1].endswith(f"attempts {result.metrics['matches']['attempted']}")
     assert 50 <= result.frames <= 300
     html = (result.out_dir / "replay.html").read_text()
     assert "__VISER_EMBED_DATA__" in html
