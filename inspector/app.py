@@ -622,6 +622,8 @@ class ClientView:
             self.status.content = f"*{message}* ({fraction * 100:.0f} %)"
         elif self.session is not None:
             self.set_status()
+        else:
+            self.status.content = "**routefuse inspector** · nothing loaded (open a log in Files)"
 
     def set_status(self) -> None:
         s = self.session
