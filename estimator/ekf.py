@@ -623,6 +623,32 @@ def pseudo_position_update(
     return np.array([y[0], y[1], x[X_POS] - p0, x[X_POS + 1] - p1])
 
 
+@njit(cache=True, error_model="numpy")
+def heading_update(
+    x: np.ndarray, P: np.ndarray, aux: np.ndarray, cfg: np.ndarray, dyaw: float, var: float
+) -> float:
+    """A yaw observation: the true yaw is the estimate plus ``dyaw`` (rad) with variance
+    ``var``. Returns the yaw change applied."""
+    flush_covariance(P, aux, cfg)
+    H = np.zeros((3, NE))
+    R = np.zeros((3, 3))
+    y = np.zeros(3)
+    PHt = np.empty((NE, 3))
+    S = np.empty((3, 3))
+    Si = np.empty((3, 3))
+    H[0, E_ATT + 2] = 1.0
+    R[0, 0] = var
+    y[0] = dyaw
+    C = np.empty((3, 3))
+    quat_to_dcm(x[X_QUAT : X_QUAT + 4], C)
+    yaw0 = dcm_to_euler(C)[2]
+    _innovation_cov(P, H, R, 1, PHt, S, Si)
+    _apply_update(x, P, y, 1, PHt, Si, cfg[C_SCALE_ON] > 0)
+    quat_to_dcm(x[X_QUAT : X_QUAT + 4], C)
+    d = dcm_to_euler(C)[2] - yaw0
+    return math.atan2(math.sin(d), math.cos(d))
+
+
 # ---------------------------------------------------------------------------------------------
 # the loop
 

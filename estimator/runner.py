@@ -701,6 +701,18 @@ class _Driver:
                 np.asarray(rec.obs_cov, float),
             )
             innovation, correction = res[:2].copy(), res[2:].copy()
+            heading = _heading_observation(rec, self.p)
+            if heading is not None:
+                applied = ekf.heading_update(
+                    self.x, self.P, self.aux, self.inp.cfg, heading[0], heading[1] ** 2
+                )
+                extra = {
+                    **rec.extra,
+                    "heading_obs_rad": heading[0],
+                    "heading_obs_sigma_rad": heading[1],
+                    "heading_correction_rad": applied,
+                }
+                rec = dataclasses.replace(rec, extra=extra)
             if not ekf._finite(self.x, self.P):
                 raise LogError(
                     self.log.path,
@@ -760,7 +772,10 @@ class _Driver:
         different outcome, then run live from there."""
         self.out = old.out
         outage_cps = [c for c in old.checkpoints if c.kind == "outage"]
-        same_trigger = self.p.trigger == old_params.trigger
+        same_trigger = (
+            self.p.trigger == old_params.trigger
+            and self.p.extensions.heading_observation == old_params.extensions.heading_observation
+        )
         if not self.matching or not reuse_matching or not same_trigger:
             if not outage_cps:
                 self._copy_old(old, len(old.checkpoints), old.n_out)
@@ -787,8 +802,13 @@ class _Driver:
                 self._restart(old, cp, n_cp + 1, records)
                 self._loop(cp.interval, cp)
                 return
+            applied = {k: v for k, v in prev.extra.items() if k.startswith("heading_")}
             rec = dataclasses.replace(
-                rec, epoch=prev.epoch, innovation=prev.innovation, correction=prev.correction
+                rec,
+                epoch=prev.epoch,
+                innovation=prev.innovation,
+                correction=prev.correction,
+                extra={**rec.extra, **applied},
             )
             records.append(rec)
             x_after = old.out[prev.epoch, ekf.O_POS : ekf.O_POS + 3]
@@ -833,6 +853,24 @@ class _Driver:
         )
 
 
+def _heading_observation(rec: MatchRecord, p: Params) -> tuple[float, float] | None:
+    """(yaw innovation, 1-sigma) from an accepted match's fitted rotation, or None.
+
+    The rotation that maps the DR window onto the route is the heading error the window was
+    dead-reckoned with. Its sigma is that of a rigid fit of ``n_pairs`` points spread over the
+    window's length with the registration residual as point noise (sqrt(12 / N) / L), floored
+    at 0.1 deg; the window's own heading drift is part of the residual."""
+    if not (p.extensions.heading_observation and rec.accepted and rec.n_pairs >= 3):
+        return None
+    dyaw = float(rec.rotation_rad)
+    length = (rec.n_pairs - 1) * p.window.spacing_m
+    if not (math.isfinite(dyaw) and length > 0):
+        return None
+    noise = max(float(rec.residual_m), 0.5) if math.isfinite(rec.residual_m) else 0.5
+    sigma = max(noise * math.sqrt(12.0 / rec.n_pairs) / length, math.radians(0.1))
+    return dyaw, sigma
+
+
 def _same_outcome(new: MatchRecord, old: MatchRecord) -> bool:
     """Whether a re-evaluated attempt leaves the filter exactly as the old one did."""
     if new.accepted != old.accepted:
@@ -842,4 +880,7 @@ def _same_outcome(new: MatchRecord, old: MatchRecord) -> bool:
     return bool(
         np.array_equal(new.pseudo_position, old.pseudo_position)
         and np.array_equal(new.obs_cov, old.obs_cov)
+        and new.rotation_rad == old.rotation_rad
+        and new.n_pairs == old.n_pairs
+        and new.residual_m == old.residual_m
     )

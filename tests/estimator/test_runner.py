@@ -329,3 +329,22 @@ def test_cruising_without_wheel_speed_is_not_taken_for_a_stop():
     err = np.linalg.norm(r.epochs.position[:, :2] - _truth_en(log, FRAME, r.epochs.t), axis=1)
     # 45 s of IMU + NHC after 9 s of GNSS: 2 m measured; a false stop costs tens of metres
     assert err.max() < 5.0
+
+
+def test_heading_observation_is_applied_and_recorded(tunnel, tunnel_proposed):
+    log, route, frame = tunnel
+    p = with_values(Params(), {"extensions.heading_observation": True})
+    r = run(log, route, p, method="proposed", frame=frame)
+    assert _finite(r)
+    accepted = [m for m in r.matches if m.accepted]
+    assert accepted
+    for m in accepted:
+        assert m.extra["heading_obs_rad"] == m.rotation_rad
+        assert m.extra["heading_obs_sigma_rad"] >= np.radians(0.1)
+        # the update moves yaw towards the observation, never past it
+        applied = m.extra["heading_correction_rad"]
+        assert abs(applied) <= abs(m.rotation_rad) + 1e-12
+        assert applied * m.rotation_rad >= 0
+    assert not any("heading_obs_rad" in m.extra for m in tunnel_proposed.matches)
+    again = run(log, route, p, method="proposed", frame=frame, reuse=tunnel_proposed)
+    assert _same_epochs(again, r)
