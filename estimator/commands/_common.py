@@ -26,7 +26,7 @@ def add_param_options(parser: argparse.ArgumentParser) -> None:
     for spec in param_specs():
         unit = f" [{spec.unit}]" if spec.unit else ""
         g.add_argument(_flag(spec.name), dest=f"param:{spec.name}", metavar="V", default=None,
-                       help=f"{spec.doc}{unit} (default {spec.default})")
+                       help=f"{spec.doc}{unit} (default {spec.default})".replace("%", "%%"))
 
 
 def params_from_args(args: argparse.Namespace) -> Params:
