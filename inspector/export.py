@@ -123,6 +123,7 @@ def export_log(
     method: Method = "proposed",
     outages: Sequence[tuple[float, float]] = (),
     topics: TopicChoice = AUTO_TOPICS,
+    route_feature: str | int | None = None,
     replay: ReplayOptions = ReplayOptions(),
     progress: Progress | None = None,
 ) -> ExportResult:
@@ -130,7 +131,8 @@ def export_log(
     ``out_dir`` (created if missing; files of an earlier export are overwritten).
 
     ``outages``: (start, end) seconds after the log start where GNSS is removed, as
-    ``routefuse run --outage``."""
+    ``routefuse run --outage``. ``route_feature``: which line of a route file holding several
+    (name or index)."""
     from estimator.inputs import open_inputs
     from estimator.runner import run
 
@@ -151,7 +153,13 @@ def export_log(
         timings[name] = now - clock
         clock = now
 
-    inputs = open_inputs(log_path, route_path, topics=topics, progress=stage("loading", 0, 0.2))
+    inputs = open_inputs(
+        log_path,
+        route_path,
+        topics=topics,
+        route_feature=route_feature,
+        progress=stage("loading", 0, 0.2),
+    )
     lap("load_s")
     for a, b in outages:
         if a >= inputs.log.duration_s:

@@ -28,6 +28,12 @@ def add_arguments(parser: argparse.ArgumentParser) -> None:
         help="export every log of a folder (or matching a quoted glob); each log's route is "
         "<stem>.route.geojson beside it",
     )
+    parser.add_argument(
+        "--route-feature",
+        metavar="NAME_OR_INDEX",
+        default=None,
+        help="which line of a route file that holds several",
+    )
     parser.add_argument("--out", metavar="DIR", required=True, help="output folder")
     parser.add_argument(
         "--method",
@@ -138,6 +144,7 @@ def execute(args: argparse.Namespace) -> int:
         method=args.method,
         outages=outages,
         topics=topics,
+        route_feature=args.route_feature,
         replay=replay,
         progress=report,
     )

@@ -114,3 +114,12 @@ def test_output_folder_that_is_a_file(bag, tmp_path, capsys):
     assert main(["export", str(log), "--route", str(route), "--out", str(out)]) == 2
     err = capsys.readouterr().err.strip().splitlines()
     assert err[-1].startswith(f"routefuse: error: {out}: cannot create the output folder")
+
+
+def test_help_lists_the_options(capsys):
+    with pytest.raises(SystemExit) as exit_:
+        main(["export", "--help"])
+    assert exit_.value.code == 0
+    text = capsys.readouterr().out
+    for option in ("--batch", "--outage", "--fps", "--time-lapse", "--config", "--imu-topic"):
+        assert option in text
