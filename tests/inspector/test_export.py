@@ -336,3 +336,24 @@ def test_trajectory_csv_columns(exported):
     assert np.all(np.diff(data["time"]) >= 0)
     assert set(np.unique(data["degraded"])) <= {0.0, 1.0}
     assert data["degraded"].sum() > 0 and data["gnss_used"].sum() > 0
+
+
+def test_log_without_truth_as_ros1_bag(bag, tmp_path):
+    """A real log has no ground truth: no truth TUM, no truth columns, no truth table."""
+    from estimator.bagio import load_log
+    from estimator.bagwrite import write_bag
+
+    log_path, route = bag
+    log = load_log(log_path)
+    ros1 = tmp_path / "drive.bag"
+    write_bag(ros1, imu=log.imu, gnss=log.gnss, wheel=log.wheel, storage="ros1")
+    result = export_log(ros1, route, tmp_path / "out", replay=ReplayOptions(fps=0.5))
+    names = {p.name for p in result.files}
+    assert names == EXPECTED - {"trajectory_truth.tum"}
+    assert all(m["truth"] is None for m in result.metrics["methods"].values())
+    header = (result.out_dir / "metrics.csv").read_text().splitlines()[0].split(",")
+    assert "rmse_pos_dev_m" in header and "rmse_h_err_m" not in header
+    page = (result.out_dir / "report.html").read_text()
+    assert "Error against ground truth" not in page
+    lines = json.loads((result.out_dir / "trajectories.geojson").read_text())["features"]
+    assert "truth" not in {f["properties"]["name"] for f in lines}
