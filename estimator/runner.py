@@ -20,7 +20,6 @@ from __future__ import annotations
 
 import dataclasses
 import math
-import weakref
 from collections.abc import Callable, Sequence
 from dataclasses import dataclass, field
 
@@ -91,7 +90,8 @@ class _Checkpoint:
 
 @dataclass(frozen=True)
 class _Resume:
-    log: weakref.ref
+    log: tuple
+    """fingerprint of the log (:func:`_log_key`); a Run stays picklable"""
     route: Route | None
     frame: LocalFrame
     outages: tuple[tuple[float, float], ...]
@@ -138,7 +138,7 @@ def run(
     old = reuse.resume if reuse is not None and isinstance(reuse.resume, _Resume) else None
     key = _filter_key(p)
     if old is not None and not (
-        old.log() is log
+        old.log == _log_key(log)
         and old.frame == frame
         and old.outages == outages_t
         and old.filter_key == key
@@ -163,7 +163,7 @@ def run(
     if progress is not None:
         progress(1.0)
     resume = _Resume(
-        log=weakref.ref(log),
+        log=_log_key(log),
         route=route,
         frame=frame,
         outages=outages_t,
@@ -186,6 +186,25 @@ def run(
         + inputs.warnings
         + (route.warnings if route is not None else ()),
         resume=resume,
+    )
+
+
+def _log_key(log: Log) -> tuple:
+    """Identifies a log's content cheaply: sizes, spans and sums over a sample of values."""
+    imu, g = log.imu, log.gnss
+    step = max(1, len(imu.t) // 4096)
+    wheel = () if log.wheel is None else (len(log.wheel.t), float(np.nansum(log.wheel.speed)))
+    return (
+        log.path,
+        len(imu.t),
+        float(imu.t[0]) if len(imu.t) else 0.0,
+        float(imu.t[-1]) if len(imu.t) else 0.0,
+        float(np.nansum(imu.gyro[::step])),
+        float(np.nansum(imu.accel[::step])),
+        len(g.t),
+        float(np.nansum(g.lat)),
+        float(np.nansum(g.lon)),
+        wheel,
     )
 
 

@@ -174,9 +174,18 @@ def test_reuse_of_a_baseline_run_for_proposed(tunnel):
 
 def test_reuse_is_ignored_for_another_log(tunnel, tunnel_proposed):
     log, route, frame = tunnel
-    other = dataclasses.replace(log)
-    r = run(other, route, Params(), method="proposed", frame=frame, reuse=tunnel_proposed)
-    assert _same_epochs(r, tunnel_proposed)
+    gyro = log.imu.gyro.copy()
+    gyro[:, 2] += np.radians(0.01)  # another log: same times, a different gyro
+    other = dataclasses.replace(log, imu=ImuData(t=log.imu.t, gyro=gyro, accel=log.imu.accel))
+    again = run(other, route, Params(), method="proposed", frame=frame, reuse=tunnel_proposed)
+    fresh = run(other, route, Params(), method="proposed", frame=frame)
+    assert _same_epochs(again, fresh)
+    assert not _same_epochs(again, tunnel_proposed)
+    # a copy of the same log is the same log (a Run can be pickled and reused)
+    same = dataclasses.replace(log)
+    assert _same_epochs(
+        run(same, route, Params(), frame=frame, reuse=tunnel_proposed), tunnel_proposed
+    )
 
 
 def test_no_wheel_and_an_outage_to_the_end_stay_finite():
