@@ -144,7 +144,7 @@ class ClientView:
         self.step_buttons = gui.add_button_group("frame", ("« 10", "‹ prev", "next ›", "10 »"))
         self.step_buttons.on_click(self._on_step)
         self.match_buttons = gui.add_button_group(
-            "match", ("‹ attempt", "attempt ›", "‹ rejected", "next rejected ›")
+            "match", ("‹ attempt", "attempt ›", "‹ rejected", "rejected ›")
         )
         self.match_buttons.on_click(self._on_match_nav)
         self.play_button = gui.add_button("play", hint="play / pause (space)")
@@ -316,7 +316,7 @@ class ClientView:
             "‹ attempt": "previous",
             "attempt ›": "next",
             "‹ rejected": "previous rejected",
-            "next rejected ›": "rejected",
+            "rejected ›": "rejected",
         }[self.match_buttons.value]
         self.jump(which)
 

@@ -130,6 +130,38 @@ class Layer:
             if colors_arr.ndim == 2:
                 h.colors = colors_arr  # type: ignore[attr-defined]
 
+    def _dots(self, name: str, xy: F64, colors: np.ndarray, px: float, z: float) -> None:
+        """Markers that keep their size on screen at any zoom: tiny segments drawn with a
+        thickness in pixels (a point cloud's points have a size in metres)."""
+        xy = np.asarray(xy, np.float64).reshape(-1, 2)
+        d = np.array([0.01, 0.0])
+        seg = (
+            np.stack([_points3(xy - d, z), _points3(xy + d, z)], axis=1)
+            if len(xy)
+            else (_EMPTY_SEG)
+        )
+        cols = np.asarray(colors, np.uint8).reshape(-1, 3)
+        cols = (
+            np.repeat(cols[:, None, :], 2, axis=1)
+            if len(cols) == len(seg)
+            else np.zeros((len(seg), 2, 3), np.uint8)
+        )
+        h = self._handles.get(name)
+        if h is not None and h.points.shape == seg.shape:  # type: ignore[attr-defined]
+            h.points = seg  # type: ignore[attr-defined]
+            h.colors = cols  # type: ignore[attr-defined]
+            return
+        if h is not None:
+            h.remove()
+        self._handles[name] = self.scene.add_line_segments(
+            f"{self.root}/{name}",
+            seg,
+            cols,
+            thickness=px,
+            thickness_units="screen",
+            visible=self._visible,
+        )
+
     def set_data(self, data: SceneData) -> None:
         """Draw what does not depend on time."""
 
@@ -191,8 +223,19 @@ class TrackLayer(Layer):
                 receive_shadow=False,
                 visible=self._visible,
             )
+        if "marker" not in self._handles:
+            # the pose seen from far away: a dot of constant size on screen
+            self._handles["marker"] = self.scene.add_line_segments(
+                f"{self.root}/marker",
+                np.array([[[-0.01, 0, 0], [0.01, 0, 0]]], np.float32),
+                self.color,
+                thickness=11.0,
+                thickness_units="screen",
+                visible=self._visible,
+            )
         self._show("line", track is not None)
         self._show("pose", track is not None)
+        self._show("marker", track is not None)
 
     def set_pose_scale(self, scale: float) -> None:
         """Enlarge the vehicle marker: seen from high above a whole drive, a car-sized marker
@@ -209,6 +252,7 @@ class TrackLayer(Layer):
         h = self._handles["pose"]
         h.position = (float(xy[0]), float(xy[1]), self.z + 0.3)
         h.wxyz = _yaw_wxyz(yaw)
+        self._handles["marker"].position = (float(xy[0]), float(xy[1]), self.z + 0.35)
 
 
 class BaselineLayer(TrackLayer):
@@ -250,11 +294,8 @@ class VerdictLayer(Layer):
 
     def set_data(self, data: SceneData) -> None:
         ok = np.all(np.isfinite(data.match_xy), axis=1) if len(data.match_xy) else np.zeros(0, bool)
-        pts = _points3(data.match_xy[ok], 0.4)
         colors = np.where(data.match_accepted[ok, None], ACCEPTED, REJECTED).astype(np.uint8)
-        if len(colors) == 0:
-            colors = np.array([ACCEPTED], np.uint8)
-        self._cloud("markers", pts, colors, 2.5)
+        self._dots("markers", data.match_xy[ok], colors, 7.0, z=0.05)
         self._show("markers", bool(ok.any()))
 
 

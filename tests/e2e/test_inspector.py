@@ -225,7 +225,7 @@ def test_next_rejected_attempt_shows_the_failed_gate(page, inspector):
     assert controller.session.params.gates.min_pairs == 500
     pg.get_by_role("tab", name="Match").click()
     start = _frame(pg)
-    _click(pg, "next rejected ›")
+    _click(pg, "rejected ›")
     _wait(lambda: "REJECTED" in pg.inner_text("body"), 10, "a rejected attempt")
     text = pg.inner_text("body")
     assert re.search(r"min_pairs\s+[\d.]+\s+>= 500\.000\s+✗ FAILED", text), text[:2000]
