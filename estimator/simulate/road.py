@@ -182,15 +182,21 @@ def _steps(pieces: Sequence[Piece], attr: str, s0: F64, default: float, ramp_len
     cur = default if cur is None else cur
     base = cur
     starts, lengths, deltas = [], [], []
+    prev_end = -np.inf
     for i, p in enumerate(pieces):
         v = getattr(p, attr)
         if v is None or i == 0 or v == cur:
             continue
         length = ramp_len(cur, v)
         # slow down before the piece, speed up after its start; grades change centred
-        start = s0[i] - length if attr == "speed_m_s" and v < cur else s0[i]
         if attr == "grade":
             start = s0[i] - 0.5 * length
+        else:
+            start = s0[i] - length if v < cur else s0[i]
+            # one speed change at a time (the acceleration stays bounded), none before 0:
+            # a change that does not fit before its piece finishes inside it
+            start = max(start, prev_end, 0.0)
+        prev_end = start + length
         starts.append(start)
         lengths.append(length)
         deltas.append(v - cur)
