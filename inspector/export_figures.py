@@ -28,6 +28,8 @@ F64 = NDArray[np.float64]
 ROUTE_COLOR = "#787878"
 TRUTH_COLOR = "#1e963c"
 OUTAGE_COLOR = "#dc3232"
+ACCEPTED_COLOR = "#1eaa3c"
+REJECTED_COLOR = "#dc2828"
 DPI = 150
 ZOOM_MIN_HALF_M = 60.0
 """the zoom panel shows at least 120 m: the lane, the route and a stretch of both tracks"""
@@ -118,8 +120,8 @@ def _draw_map(ax: Any, scene: SceneData, method: str, *, adjustable: str = "data
     ax.plot(*scene.proposed.line.T, color=PROPOSED_COLOR, lw=1.3, label=method)
     if len(scene.match_xy):
         ok = scene.match_accepted
-        ax.scatter(*scene.match_xy[ok].T, s=6, color="#1eaa3c", zorder=1.5, label="accepted")
-        ax.scatter(*scene.match_xy[~ok].T, s=6, color="#dc2828", zorder=1.5, label="rejected")
+        ax.scatter(*scene.match_xy[ok].T, s=6, color=ACCEPTED_COLOR, zorder=1.5, label="accepted")
+        ax.scatter(*scene.match_xy[~ok].T, s=6, color=REJECTED_COLOR, zorder=1.5, label="rejected")
     ax.set_aspect("equal", adjustable=adjustable)
     ax.set_xlabel("east [m]")
     ax.set_ylabel("north [m]")

@@ -27,6 +27,14 @@ from estimator.metrics import method_metrics
 from estimator.results import Run
 from estimator.simulate.model import dcm_from_euler
 
+from .export_figures import (
+    ACCEPTED_COLOR,
+    OUTAGE_COLOR,
+    REJECTED_COLOR,
+    ROUTE_COLOR,
+    TRUTH_COLOR,
+)
+from .plots import BASELINE_COLOR, PROPOSED_COLOR
 from .scene_data import display_polyline
 
 if TYPE_CHECKING:
@@ -35,10 +43,6 @@ if TYPE_CHECKING:
 F64 = NDArray[np.float64]
 
 TUM_SUFFIX = ".tum"
-_COLORS = {"route": "#787878", "baseline": "#e8710a", "truth": "#1e963c"}
-_COMPARED_COLOR = "#1a73e8"
-_ACCEPTED_COLOR = "#1eaa3c"
-_REJECTED_COLOR = "#dc2828"
 
 
 def metrics_document(
@@ -299,10 +303,10 @@ def write_geojson(
     as a point with its verdict. Colours in the simplestyle properties geojson.io draws."""
     frame = compared.frame
     features = [
-        _line(frame, inputs.route.xy, {"name": "route", "stroke": _COLORS["route"]}),
+        _line(frame, inputs.route.xy, {"name": "route", "stroke": ROUTE_COLOR}),
     ]
     for run in (baseline, compared):
-        color = _COLORS.get(run.method, _COMPARED_COLOR)
+        color = BASELINE_COLOR if run.method == "baseline" else PROPOSED_COLOR
         features.append(
             _line(
                 frame,
@@ -311,9 +315,7 @@ def write_geojson(
             )
         )
     if truth is not None:
-        features.append(
-            _line(frame, truth[1][:, :2], {"name": "truth", "stroke": _COLORS["truth"]})
-        )
+        features.append(_line(frame, truth[1][:, :2], {"name": "truth", "stroke": TRUTH_COLOR}))
     ep = compared.epochs
     for a, b in compared.degraded_intervals:
         m = (ep.t >= a) & (ep.t <= b)
@@ -326,7 +328,7 @@ def write_geojson(
                         "name": "GNSS outage",
                         "start_s": a - compared.t0,
                         "end_s": b - compared.t0,
-                        "stroke": "#ff5050",
+                        "stroke": OUTAGE_COLOR,
                         "stroke-width": 6,
                         "stroke-opacity": 0.4,
                     },
@@ -343,7 +345,7 @@ def write_geojson(
                     "name": f"attempt {m.index}",
                     "t_s": round(m.t - compared.t0, 3),
                     "verdict": m.verdict,
-                    "marker-color": _ACCEPTED_COLOR if m.accepted else _REJECTED_COLOR,
+                    "marker-color": ACCEPTED_COLOR if m.accepted else REJECTED_COLOR,
                     "marker-size": "small",
                 },
                 "geometry": {"type": "Point", "coordinates": _lonlat(frame, p)[0]},
