@@ -31,7 +31,7 @@ from numpy.typing import NDArray
 from .errors import LogError
 from .log import GnssData, ImuData, Log, TopicInfo, TruthData, WheelData
 
-CACHE_VERSION = 2
+CACHE_VERSION = 3
 CACHE_MAX_BYTES = 2_000_000_000
 """Least recently used cache entries are removed beyond this total size."""
 MIN_IMU_SAMPLES = 10
@@ -391,8 +391,12 @@ def _find_offsets(
         return None
 
 
-def _quat_to_matrix(x: float, y: float, z: float, w: float) -> F64:
-    n = np.sqrt(x * x + y * y + z * z + w * w)
+def _quat_to_matrix(x: float, y: float, z: float, w: float) -> F64 | None:
+    """The rotation matrix of a quaternion, or None if it has no direction (zero, NaN, inf)."""
+    with np.errstate(all="ignore"):
+        n = float(np.sqrt(x * x + y * y + z * z + w * w))
+    if not (np.isfinite(n) and n > 1e-9):
+        return None
     x, y, z, w = x / n, y / n, z / n, w / n
     return np.array(
         [
@@ -446,6 +450,7 @@ def _decode(
     total = max(sum(int(c.msgcount or 0) for c in wanted), 1)
     step = max(total // 50, 1000)
     edges: list[tuple[str, str, F64]] = []
+    bad_tf: list[str] = []
     for done, (conn, recv_ns, raw) in enumerate(reader.messages(connections=wanted), 1):
         stream = streams.get(conn.topic)
         if stream is not None:
@@ -453,16 +458,15 @@ def _decode(
         else:
             for tf in reader.deserialize(raw, conn.msgtype).transforms:
                 r = tf.transform.rotation
-                edges.append(
-                    (
-                        _frame(tf.header.frame_id),
-                        _frame(tf.child_frame_id),
-                        _quat_to_matrix(r.x, r.y, r.z, r.w),
-                    )
-                )
+                parent, child = _frame(tf.header.frame_id), _frame(tf.child_frame_id)
+                matrix = _quat_to_matrix(r.x, r.y, r.z, r.w)
+                if matrix is None:
+                    bad_tf.append(f"{parent} -> {child}")
+                else:
+                    edges.append((parent, child, matrix))
         if progress is not None and done % step == 0:
             progress(min(done / total, 0.99))
-    out: dict[str, Any] = {"edges": edges}
+    out: dict[str, Any] = {"edges": edges, "bad_tf": bad_tf}
     wheel_child = ""
     for topic, stream in streams.items():
         t, v = stream.arrays()
@@ -534,6 +538,11 @@ def _assemble(
     _note_irregular(f"IMU {roles.imu}", t, warnings)
     gyro, accel = v[:, :3], v[:, 3:6]
     body = next((b for b in raw["body_candidates"] if b), "base_link")
+    if raw["bad_tf"]:
+        warnings.append(
+            f"/tf_static: ignored {len(raw['bad_tf'])} transforms with a zero or non-finite "
+            f"rotation ({', '.join(raw['bad_tf'][:3])})"
+        )
     if raw["edges"] and imu_frame and imu_frame != body:
         rot = _rotation_between(raw["edges"], body, imu_frame)
         if rot is not None:
