@@ -348,3 +348,21 @@ def test_a_long_gap_does_not_stall_a_run_with_progress(
     assert not worker.is_alive(), f"run still going after 60 s (progress {seen[-3:]})"
     assert done and seen[-1] == 1.0 and np.all(np.diff(seen) >= 0)
     finite_run(done[0])  # type: ignore[arg-type]
+
+
+@pytest.mark.parametrize("rotation", [(0.0, 0.0, 0.0, 0.0), (np.nan, 0.0, 0.0, 1.0)])
+def test_a_tf_static_without_a_rotation_is_ignored(tmp_path: Path, rotation) -> None:
+    """Found by the loader fuzz test: a zero or NaN quaternion in /tf_static made every IMU
+    sample NaN. The transform is now ignored with a warning and the IMU is left as it is."""
+    from estimator.bagwrite import StaticTransform
+
+    sim = base_sim()
+    path = write_log(
+        tmp_path / "tf.mcap",
+        imu_frame="imu_link",
+        static_transforms=[StaticTransform("base_link", "imu_link", rotation)],
+    )
+    log = load_log(path, cache_dir=tmp_path / "cache")
+    finite_log(log)
+    np.testing.assert_array_equal(log.imu.gyro, sim.imu.gyro)
+    assert _has(log.warnings, "/tf_static: ignored 1 transforms with a zero or non-finite")
