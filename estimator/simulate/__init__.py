@@ -11,7 +11,7 @@ estimator's mechanisation must match it. Typical use::
 
 from .road import Piece, Road, pieces_from_polyline, straight, turn
 from .scenario import GnssOutage, Scenario
-from .scenarios import SCENARIOS, get_scenario, long_drive
+from .scenarios import SCENARIOS, get_scenario, long_drive, polyline_scenario
 from .sdmap import RouteModel
 from .sensors import GnssErrorModel, ImuErrorModel, ImuErrors, WheelErrorModel
 from .simulation import Simulation, simulate
@@ -34,6 +34,7 @@ __all__ = [
     "get_scenario",
     "long_drive",
     "pieces_from_polyline",
+    "polyline_scenario",
     "simulate",
     "straight",
     "turn",

@@ -9,10 +9,12 @@ in Hebei (a long, a curved and a multi-segment stretch), placed in Hebei's mount
 
 from __future__ import annotations
 
-from collections.abc import Callable
+from collections.abc import Callable, Sequence
 from dataclasses import replace
+from typing import Any
 
 import numpy as np
+from numpy.typing import ArrayLike
 
 from ..errors import ConfigError
 from ..geo import LocalFrame
@@ -116,53 +118,70 @@ def multi_tunnel() -> Scenario:
     )
 
 
-def monaco_tunnel() -> Scenario:
-    ll = np.asarray(LONLAT, np.float64)
-    lat0, lon0, h0 = float(ll[0, 1]), float(ll[0, 0]), 120.0
-    frame = LocalFrame(lat0, lon0, h0)
+def polyline_scenario(
+    name: str,
+    lonlat: ArrayLike,
+    *,
+    tunnel_intervals_m: Sequence[tuple[float, float]],
+    description: str = "",
+    origin_h_m: float = 0.0,
+    smoothing_m: float = 20.0,
+    speed_m_s: float = 15.0,
+    tunnel_speed_m_s: float | None = None,
+    grade: float = 0.0,
+    approach: Sequence[Piece] | None = None,
+    exit_m: float = 300.0,
+    exit_speed_m_s: float | None = None,
+    max_lateral_accel_m_s2: float = 2.0,
+    **scenario_options: Any,
+) -> Scenario:
+    """A drive along a given route polyline (lon, lat), e.g. a real road from a map.
+
+    The polyline is smoothed into a drivable road (:func:`pieces_from_polyline`); the
+    ``approach`` pieces (default: :func:`_open_sky_warmup`, about 80 s with turns) are joined
+    tangentially before its start and a straight of ``exit_m`` after its end. Where a curve
+    would need more than ``max_lateral_accel_m_s2`` the vehicle slows down for it.
+    ``tunnel_intervals_m`` are arc-length intervals of the given polyline. The route written is
+    the given polyline's own vertices (a real map's spacing), with the approach and exit mapped
+    as :func:`.sdmap.map_route` does and 200 m straight extensions.
+    """
+    ll = np.asarray(lonlat, np.float64)
+    lat0, lon0 = float(ll[0, 1]), float(ll[0, 0])
+    frame = LocalFrame(lat0, lon0, origin_h_m)
     xy = frame.to_enu(ll[:, 1], ll[:, 0])[:, :2]
-    s_v = np.r_[0.0, np.cumsum(np.hypot(*np.diff(xy, axis=0).T))]
-    tunnel = [(float(s_v[TUNNEL_START_VERTEX]), float(s_v[TUNNEL_END_VERTEX]))]
-    osm, osm_start, osm_heading = pieces_from_polyline(
-        xy, smoothing_m=20.0, speed_m_s=12.0, grade=-0.02, tunnel_intervals=tunnel
+    road_pieces, road_start, road_heading = pieces_from_polyline(
+        xy,
+        smoothing_m=smoothing_m,
+        speed_m_s=speed_m_s,
+        grade=grade,
+        tunnel_intervals=tunnel_intervals_m,
     )
-    # a synthetic approach ending where the OSM lead-in starts, tangent to it
-    approach = (
-        straight(100, speed_m_s=12.0)
-        + turn(-70, 120, transition_m=40, speed_m_s=10.0)
-        + straight(150, speed_m_s=14.0)
-        + turn(60, 150, transition_m=40, speed_m_s=11.0)
-        + straight(100, speed_m_s=13.0)
-        + turn(-25, 250)
-        + straight(50)
-    )
+    approach = tuple(_open_sky_warmup(speed_m_s) if approach is None else approach)
     probe = Road(approach)
     end_xy = probe.xy(probe.length)[0]
-    heading0 = osm_heading - float(probe.heading(probe.length)[0])
+    heading0 = road_heading - float(probe.heading(probe.length)[0])
     c, s = np.cos(heading0), np.sin(heading0)
-    start = np.asarray(osm_start) - np.array(
+    start = np.asarray(road_start) - np.array(
         [c * end_xy[0] - s * end_xy[1], s * end_xy[0] + c * end_xy[1]]
     )
-    # tunnel speed after the lead-in; open road again after it
-    n_in = next(i for i, p in enumerate(osm) if p.tunnel)
-    n_out = max(i for i, p in enumerate(osm) if p.tunnel) + 1
-    osm = (
-        *osm[:n_in],
-        replace(osm[n_in], speed_m_s=14.0),
-        *osm[n_in + 1 : n_out],
-        replace(osm[n_out], grade=0.0),
-        *osm[n_out + 1 :],
-    )
-    exit_road = straight(350, speed_m_s=15.0)
-    pieces = approach + osm + exit_road
-    # the map: the approach and exit as a map would draw them, the OSM vertices unchanged
+    in_tunnel = [i for i, p in enumerate(road_pieces) if p.tunnel]
+    if in_tunnel:
+        n_in, n_out = in_tunnel[0], in_tunnel[-1] + 1
+        pieces_list = list(road_pieces)
+        if tunnel_speed_m_s is not None:
+            pieces_list[n_in] = replace(pieces_list[n_in], speed_m_s=tunnel_speed_m_s)
+        if n_out < len(pieces_list):
+            pieces_list[n_out] = replace(pieces_list[n_out], grade=0.0)
+        road_pieces = tuple(pieces_list)
+    road_pieces = _cap_speed_in_curves(road_pieces, speed_m_s, max_lateral_accel_m_s2)
+    exit_road = straight(exit_m, speed_m_s=exit_speed_m_s)
+    pieces = approach + road_pieces + exit_road
     road = Road(pieces, start_xy=(float(start[0]), float(start[1])), heading0=heading0)
-    a_len, o_len = probe.length, sum(p.length_m for p in osm)
-    route_model = RouteModel()
-    before = map_route(road.xy(np.linspace(0.0, a_len, 200)), replace(route_model, extend_m=0))
-    after = map_route(
-        road.xy(np.linspace(a_len + o_len, road.length, 100)), replace(route_model, extend_m=0)
-    )
+    a_len, o_len = probe.length, sum(p.length_m for p in road_pieces)
+    route_model = scenario_options.pop("route", RouteModel())
+    unextended = replace(route_model, extend_m=0)
+    before = map_route(road.xy(np.linspace(0.0, a_len, 200)), unextended)
+    after = map_route(road.xy(np.linspace(a_len + o_len, road.length, 100)), unextended)
     vertices = np.vstack([before[:-1], xy, after[1:]])
     d0 = (vertices[0] - vertices[1]) / np.hypot(*(vertices[0] - vertices[1]))
     d1 = (vertices[-1] - vertices[-2]) / np.hypot(*(vertices[-1] - vertices[-2]))
@@ -173,22 +192,91 @@ def monaco_tunnel() -> Scenario:
             vertices[-1] + route_model.extend_m * d1,
         ]
     )
-    geo = frame.to_geodetic(vertices)
+    geo = frame.to_geodetic(vertices + np.asarray(route_model.bias_enu_m, np.float64))
     route_lonlat = tuple((round(float(lon), 8), round(float(lat), 8)) for lat, lon, _ in geo)
     return Scenario(
-        name="monaco_tunnel",
-        description="the real Tunnel de Monaco (A 500, 1.6 km, S-bend; OSM geometry smoothed "
-        "with sigma 20 m) at 50 km/h after 108 s of synthetic approach and OSM lead-in; the "
-        "route is the raw OSM "
-        "polyline (segments up to 512 m) plus the mapped approach and exit; silent receiver",
+        name=name,
+        description=description or f"a drive along the given polyline {name}",
         pieces=pieces,
-        origin=(lat0, lon0, h0),
+        origin=(lat0, lon0, origin_h_m),
         heading0_deg=float(np.degrees(heading0)),
         start_xy=(float(start[0]), float(start[1])),
-        gnss_outage="silent",
-        attribution=ATTRIBUTION,
         route_lonlat=route_lonlat,
         route=route_model,
+        **scenario_options,
+    )
+
+
+def _cap_speed_in_curves(
+    pieces: tuple[Piece, ...], speed_m_s: float, max_lateral_accel: float
+) -> tuple[Piece, ...]:
+    """Slow down for curves: per-piece targets capped at sqrt(a_lat / |curvature|) (over the
+    piece and 40 m either side), reached with 0.5 m/s^2 planning, in 0.5 m/s steps."""
+    target = []
+    cur = speed_m_s
+    for p in pieces:
+        cur = cur if p.speed_m_s is None else p.speed_m_s
+        target.append(cur)
+    v = np.array(target)
+    length = np.array([p.length_m for p in pieces])
+    kmax = np.maximum(
+        np.abs([p.curvature_start for p in pieces]), np.abs([p.curvature_end for p in pieces])
+    )
+    mid = np.cumsum(length) - 0.5 * length
+    lo = np.searchsorted(mid, mid - 40.0)
+    hi = np.searchsorted(mid, mid + 40.0, side="right")
+    window = np.array([kmax[a:b].max() for a, b in zip(lo, hi, strict=True)])
+    cap = np.sqrt(max_lateral_accel / np.maximum(window, 1e-9))
+    if np.all(v <= cap):
+        return pieces
+    v = np.minimum(v, cap)
+    accel = 0.5
+    for i in range(1, len(v)):  # speeding up
+        v[i] = min(v[i], np.sqrt(v[i - 1] ** 2 + 2 * accel * length[i - 1]))
+    for i in range(len(v) - 2, -1, -1):  # slowing down before a curve
+        v[i] = min(v[i], np.sqrt(v[i + 1] ** 2 + 2 * accel * length[i]))
+    v = np.maximum(np.floor(v * 2.0) / 2.0, 1.0)
+    out = []
+    prev = None
+    for p, vi in zip(pieces, v, strict=True):
+        out.append(replace(p, speed_m_s=float(vi) if vi != prev else None))
+        prev = vi
+    return tuple(out)
+
+
+def monaco_tunnel() -> Scenario:
+    ll = np.asarray(LONLAT, np.float64)
+    h0 = 120.0
+    xy = LocalFrame(float(ll[0, 1]), float(ll[0, 0]), h0).to_enu(ll[:, 1], ll[:, 0])[:, :2]
+    s_v = np.r_[0.0, np.cumsum(np.hypot(*np.diff(xy, axis=0).T))]
+    # a synthetic approach: the real lead-in is 310 m only
+    approach = (
+        straight(100, speed_m_s=12.0)
+        + turn(-70, 120, transition_m=40, speed_m_s=10.0)
+        + straight(150, speed_m_s=14.0)
+        + turn(60, 150, transition_m=40, speed_m_s=11.0)
+        + straight(100, speed_m_s=13.0)
+        + turn(-25, 250)
+        + straight(50)
+    )
+    return polyline_scenario(
+        "monaco_tunnel",
+        LONLAT,
+        tunnel_intervals_m=[(float(s_v[TUNNEL_START_VERTEX]), float(s_v[TUNNEL_END_VERTEX]))],
+        description="the real Tunnel de Monaco (A 500, 1.6 km, S-bend; OSM geometry smoothed "
+        "with sigma 20 m) at 50 km/h after 108 s of synthetic approach and OSM lead-in; the "
+        "route is the raw OSM polyline (segments up to 512 m) plus the mapped approach and "
+        "exit; silent receiver",
+        origin_h_m=h0,
+        smoothing_m=20.0,
+        speed_m_s=12.0,
+        tunnel_speed_m_s=14.0,
+        grade=-0.02,
+        approach=approach,
+        exit_m=350.0,
+        exit_speed_m_s=15.0,
+        gnss_outage="silent",
+        attribution=ATTRIBUTION,
         source="routefuse simulate (OpenStreetMap geometry)",
     )
 

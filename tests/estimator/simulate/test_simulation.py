@@ -9,8 +9,10 @@ import pytest
 
 from estimator.bagio import load_log
 from estimator.errors import ConfigError
+from estimator.geo import LocalFrame
+from estimator.route import Route
 from estimator.routeio import load_route
-from estimator.simulate import SCENARIOS, Trajectory, get_scenario, simulate
+from estimator.simulate import SCENARIOS, Trajectory, get_scenario, polyline_scenario, simulate
 
 SAMPLES = ("long_tunnel", "spiral_tunnel", "multi_tunnel", "monaco_tunnel")
 
@@ -147,3 +149,27 @@ def test_perfect_sensors() -> None:
         sim.gnss.lat[sim.gnss.valid], sim.gnss.lon[sim.gnss.valid], sim.gnss.alt[sim.gnss.valid]
     )
     assert np.abs(fixes - truth).max() < 1e-6
+
+
+def test_drive_along_a_given_polyline() -> None:
+    """A map polyline with sparse, cornering vertices becomes a drive: the route keeps the
+    given vertices, the tunnel interval is where it was given, the approach gives open sky."""
+    frame = LocalFrame(46.0, 8.0)
+    en = np.array([[0, 0], [400, 0], [700, 250], [700, 700], [1100, 900], [1500, 900.0]])
+    geo = frame.to_geodetic(en)
+    lonlat = np.column_stack([geo[:, 1], geo[:, 0]])
+    sc = polyline_scenario("given", lonlat, tunnel_intervals_m=[(600.0, 1300.0)], speed_m_s=14.0)
+    sim = simulate(sc, seed=1)
+    route = np.asarray(sc.route_lonlat)
+    for v in np.round(lonlat, 8):
+        assert np.any(np.all(np.abs(route - v) < 1e-9, axis=1))
+    ((a, b),) = sim.tunnels
+    assert a - sim.t0 >= 60.0
+    inside = (sim.truth.t >= a) & (sim.truth.t <= b)
+    driven = Route(en).project(
+        sim.frame.to_enu(*sim.frame.to_geodetic(sim.truth.position[inside]).T)[:, :2]
+    )
+    assert driven.s.min() == pytest.approx(600.0, abs=15.0)
+    assert driven.s.max() == pytest.approx(1300.0, abs=15.0)
+    assert np.abs(driven.lateral).max() < 15.0
+    assert np.linalg.norm(sim.truth.acceleration, axis=1).max() < 2.0
