@@ -35,7 +35,8 @@ class Kinematics:
     """The true state at a set of times, in the local ENU frame (see :mod:`.model`)."""
 
     t: F64
-    """(N,) s after the start of the drive"""
+    """(N,) s: after the start of the drive from :meth:`Trajectory.at`, log time (Unix s) in
+    :attr:`Simulation.truth`"""
     sigma: F64
     """(N,) centreline arc length, m"""
     position: F64

@@ -23,6 +23,7 @@ def sample_logs() -> Path:
     return SAMPLE_LOGS
 
 
+@pytest.mark.slow
 @pytest.mark.parametrize("name", NAMES)
 def test_regenerates_bit_for_bit(name, sample_logs, tmp_path) -> None:
     command = f"routefuse simulate {name} --out sample_logs --force"
