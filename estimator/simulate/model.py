@@ -22,8 +22,8 @@ so a perfect IMU integrated with these equations reproduces the truth:
   ``dC_nb/dt = C_nb [w_ib_b - C_bn omega_ie_n]x``.
 * IMU samples are instantaneous values at their time stamps (not interval averages).
 * The IMU, the GNSS antenna and the wheel-speed reference are all at the body origin (no lever
-  arms); the wheel speed is the forward body speed ``|v_n|`` (no side slip, and the body z axis
-  is the road normal, so the non-holonomic constraint holds exactly).
+  arms); the wheel speed is the forward body speed ``|v_n|``: the body x axis is along the
+  velocity (no side slip), so the non-holonomic constraint holds exactly.
 
 Truth positions live in the same frame; ``LocalFrame.to_geodetic`` turns them into latitude,
 longitude and ellipsoidal height (the tangent plane rises above the ellipsoid by
