@@ -17,7 +17,7 @@ import numpy as np
 from numpy.typing import NDArray
 
 from .log import Log
-from .matching import learn_lane_offset, project_on_route
+from .matching import learn_lane_offset, track_on_route
 from .params import Params
 from .results import Run
 from .route import Route
@@ -159,7 +159,8 @@ def _truth_series(run: Run, log: Log) -> TruthSeries | None:
         return None
     enu = run.frame.to_enu(truth.lat, truth.lon, truth.alt)
     ok = np.isfinite(truth.t) & np.all(np.isfinite(enu[:, :2]), axis=1)
-    tt, xy, hd = truth.t[ok], enu[ok, :2], truth.heading[ok]
+    shift = run.params.sensors.truth_time_offset_s
+    tt, xy, hd = truth.t[ok] + shift, enu[ok, :2], truth.heading[ok]
     order = np.argsort(tt, kind="stable")
     tt, xy, hd = tt[order], xy[order], hd[order]
     keep = np.r_[True, np.diff(tt) > 0]
@@ -218,10 +219,10 @@ def deviation_series(
     than from the route centreline."""
     ep = run.epochs
     xy = ep.position[:, :2]
-    s, lat = project_on_route(route, xy) if len(xy) else (np.empty(0), np.empty(0))
+    s, lat = track_on_route(route, xy)
     if subtract_lane_offset and len(xy):
         lat = lat - _lane_offsets(run, route, s, lat, params or run.params)
-    dh = _wrap_deg(ep.attitude[:, 2] - route.heading_at(s)) if len(xy) else np.empty(0)
+    dh = _wrap_deg(ep.attitude[:, 2] - route.smooth_heading_at(s)) if len(xy) else np.empty(0)
     return DeviationSeries(
         t=ep.t,
         degraded=ep.degraded | interval_mask(ep.t, run.degraded_intervals),
