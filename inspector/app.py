@@ -477,7 +477,7 @@ class ClientView:
             height = max(height, data.extent_m * 0.55 / (half_h * aspect * free))
         center = np.asarray(center, float) + self._panel_shift(height)[:2]
         cam.far = max(10 * height, 1000.0)
-        cam.near = max(height / 2000, 0.05)
+        cam.near = max(height / 100, 0.05)  # depth precision for layers 5 cm apart
         cam.up_direction = (0.0, 0.0, 1.0)
         # position first: assigning it drags look_at along, so look_at is set after.
         cam.position = (float(center[0]), float(center[1]) - 0.001 * height, float(height))

@@ -188,6 +188,7 @@ class GnssLayer(Layer):
 
     def set_data(self, data: SceneData) -> None:
         self._lines("missing", data.degraded_segments, NO_GNSS, 14.0)
+        self._handles["missing"].position = (0.0, 0.0, -0.05)  # beneath everything
         self._cloud("fixes", _points3(data.gnss_fixes, 0.05), GNSS, 1.2)
         self._show("fixes", len(data.gnss_fixes) > 0)
         self._show("missing", len(data.degraded_segments) > 0)
@@ -229,7 +230,7 @@ class TrackLayer(Layer):
                 f"{self.root}/marker",
                 np.array([[[-0.01, 0, 0], [0.01, 0, 0]]], np.float32),
                 self.color,
-                thickness=11.0,
+                thickness=9.0,
                 thickness_units="screen",
                 visible=self._visible,
             )
@@ -252,7 +253,7 @@ class TrackLayer(Layer):
         h = self._handles["pose"]
         h.position = (float(xy[0]), float(xy[1]), self.z + 0.3)
         h.wxyz = _yaw_wxyz(yaw)
-        self._handles["marker"].position = (float(xy[0]), float(xy[1]), self.z + 0.35)
+        self._handles["marker"].position = (float(xy[0]), float(xy[1]), self.z + 0.25)
 
 
 class BaselineLayer(TrackLayer):

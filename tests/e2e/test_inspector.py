@@ -99,10 +99,11 @@ def _wait(predicate, timeout: float = 30.0, what: str = "condition"):
     raise AssertionError(f"timed out waiting for {what}")
 
 
-def _open(browser, inspector, *, settle: bool = True):
+def _open(browser, inspector, *, settle: bool = True, viewport: dict | None = None):
     server, _, app = inspector
     before = {v.client.client_id for v in app.views()}
-    page = browser.new_page(viewport=VIEWPORT)
+    page = browser.new_page(viewport=viewport or VIEWPORT)
+    page.set_default_timeout(90_000)  # software WebGL on a busy machine: slow, not stuck
     page.goto(f"http://127.0.0.1:{server.get_port()}")
     _wait(lambda: "Connecting" not in page.inner_text("body"), 40, "the page to connect")
     _wait(lambda: "match attempts" in page.inner_text("body"), 40, "the session")
@@ -260,7 +261,7 @@ def test_screenshot_for_the_readme(page):
 def test_two_tabs_keep_their_own_time(browser, inspector, page):
     pg1, _ = page
     f1 = _frame(pg1)
-    pg2, _ = _open(browser, inspector, settle=False)
+    pg2, _ = _open(browser, inspector, settle=False, viewport={"width": 900, "height": 600})
     try:
         for _ in range(2):  # dispatched: this tab need not finish compiling its shaders first
             pg2.get_by_role("button", name="10 »", exact=True).dispatch_event("click")
