@@ -223,6 +223,31 @@ def project_on_route(route: Route, xy: ArrayLike) -> tuple[F64, F64]:
     return s, lat
 
 
+def track_on_route(
+    route: Route, xy: ArrayLike, *, search_m: float = 50.0, chunk: int = 64
+) -> tuple[F64, F64]:
+    """Arc length and signed lateral offset of a trajectory, followed along the route: each
+    chunk of points is projected within ``search_m`` (plus the distance the chunk covers) of
+    where the previous chunk ended. A route that passes over or near itself (a climbing spiral,
+    a loop, a return carriageway) then keeps the vehicle on the stretch it is driving, where a
+    nearest-point search would jump to the other level."""
+    p = np.atleast_2d(np.asarray(xy, np.float64))[:, :2]
+    n = len(p)
+    s = np.empty(n)
+    lat = np.empty(n)
+    if n == 0:
+        return s, lat
+    s_prev = float(project_on_route(route, p[:1])[0][0])
+    step = np.r_[0.0, np.hypot(*np.diff(p, axis=0).T)]
+    for i in range(0, n, chunk):
+        j = min(i + chunk, n)
+        reach = search_m + float(np.sum(step[i:j]))
+        proj = route.project(p[i:j], np.full(j - i, s_prev), reach)
+        s[i:j], lat[i:j] = proj.s, proj.lateral
+        s_prev = float(proj.s[-1])
+    return s, lat
+
+
 def route_arc_length(
     route: Route, xy: ArrayLike, *, s_guess: float | None = None, params: Params
 ) -> float:

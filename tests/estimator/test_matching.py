@@ -576,3 +576,19 @@ def test_match_window_is_fast():
         match(path, route)
         times.append(time.process_time() - t0)
     assert np.median(times) < 0.010
+
+
+def test_track_on_route_keeps_to_the_driven_stretch() -> None:
+    """Out and back 5 m apart: a vehicle 3 m left of the outbound stretch is nearer to the
+    return stretch once beside it. Nearest-point projection jumps there; tracking along the
+    route does not."""
+    from estimator.matching import project_on_route, track_on_route
+
+    theta = np.linspace(-np.pi / 2, np.pi / 2, 30)
+    turn = np.column_stack([300 + 2.5 * np.cos(theta), 2.5 + 2.5 * np.sin(theta)])
+    route = Route(np.vstack([[-100.0, 0.0], turn, [0.0, 5.0]]))
+    drive = np.column_stack([np.arange(-50.0, 290.0, 2.0), np.full(170, 3.0)])
+    s_track, lat_track = track_on_route(route, drive)
+    s_near, _ = project_on_route(route, drive)
+    assert np.allclose(s_track, drive[:, 0] + 100) and np.allclose(lat_track, 3.0)
+    assert np.all(s_near[drive[:, 0] > 10] > 400)
