@@ -23,7 +23,7 @@ CHROMIUM_ARGS = [
     "--disable-sync",
 ]
 VIEWPORT = {"width": 1000, "height": 700}
-TIMEOUT_MS = 90_000
+TIMEOUT_MS = 180_000
 """generous: software WebGL on two shared cores"""
 
 
