@@ -62,8 +62,9 @@ class Route:
             else (),
         )
         if len(xy) < 2:
-            raise RouteError(self.source or None,
-                             "route has fewer than 2 distinct points; need a polyline")
+            raise RouteError(
+                self.source or None, "route has fewer than 2 distinct points; need a polyline"
+            )
         seg = np.diff(xy, axis=0)
         seglen = np.hypot(seg[:, 0], seg[:, 1])
         xy.setflags(write=False)
@@ -134,9 +135,9 @@ class Route:
         s_guess: ArrayLike | None = None,
         search_m: float | None = None,
     ) -> Projection:
-        """Nearest foot points. With ``s_guess``/``search_m`` only segments overlapping
-        [guess - search, guess + search] are considered, so consecutive queries along a drive
-        cannot jump to another part of a looping route."""
+        """Nearest foot points. With ``s_guess``/``search_m`` only the stretch of route within
+        [guess - search, guess + search] is considered (clipped inside long segments too), so
+        consecutive queries along a drive cannot jump to another part of a looping route."""
         p = np.atleast_2d(np.asarray(points, np.float64))[:, :2]
         n = len(p)
         a = self.xy[:-1]
@@ -144,9 +145,12 @@ class Route:
         L = self._seglen
         if s_guess is not None and search_m is not None:
             g = np.broadcast_to(np.asarray(s_guess, np.float64), (n,))
-            lo_i = self._segment_index(g - search_m)
-            hi_i = self._segment_index(g + search_m)
+            s_lo, s_hi = g - search_m, g + search_m
+            lo_i = self._segment_index(s_lo)
+            hi_i = self._segment_index(s_hi)
         else:
+            s_lo = np.full(n, -np.inf)
+            s_hi = np.full(n, np.inf)
             lo_i = np.zeros(n, np.intp)
             hi_i = np.full(n, len(L) - 1, np.intp)
         out_s = np.empty(n)
@@ -158,7 +162,10 @@ class Route:
             idx = np.minimum(idx, len(L) - 1)
             d = p[:, None, :] - a[idx]
             along = np.einsum("nkj,nkj->nk", d, u[idx])
-            along_c = np.clip(along, 0.0, L[idx])
+            seg_s = self.s[idx]
+            lo_a = np.maximum(0.0, s_lo[:, None] - seg_s)
+            hi_a = np.maximum(lo_a, np.minimum(L[idx], s_hi[:, None] - seg_s))
+            along_c = np.clip(along, lo_a, hi_a)
             foot = a[idx] + along_c[..., None] * u[idx]
             dist2 = np.sum((p[:, None, :] - foot) ** 2, axis=2)
             dist2[~valid] = np.inf
@@ -168,9 +175,13 @@ class Route:
             out_foot = foot[rows, k]
         else:
             for j in range(n):
-                proj = self.project(p[j : j + 1], None if s_guess is None else
-                                    np.broadcast_to(np.asarray(s_guess), (n,))[j : j + 1],
-                                    search_m)
+                proj = self.project(
+                    p[j : j + 1],
+                    None
+                    if s_guess is None
+                    else np.broadcast_to(np.asarray(s_guess), (n,))[j : j + 1],
+                    search_m,
+                )
                 out_s[j], out_foot[j] = proj.s[0], proj.foot[0]
         rel = p - out_foot
         tang = u[np.clip(self._segment_index(out_s), 0, len(L) - 1)]
