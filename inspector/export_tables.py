@@ -468,6 +468,29 @@ def _html_table(methods: dict[str, dict[str, Any]], group: str, caption: str) ->
     )
 
 
+def _replay_legend() -> str:
+    """The replay's colours (it has no legend of its own), from the scene layers."""
+    from . import layers as c
+
+    entries = (
+        (c.ROUTE, "route"),
+        (c.BASELINE, "baseline"),
+        (c.PROPOSED, "compared method"),
+        (c.TRUTH, "truth"),
+        (c.NO_GNSS, "GNSS outage"),
+        (c.SEGMENT, "matched route segment"),
+        (c.DR_WINDOW, "DR window"),
+        (c.ALIGNED, "aligned window"),
+        (c.PSEUDO, "pseudo-position"),
+        (c.ACCEPTED, "accepted"),
+        (c.REJECTED, "rejected"),
+    )
+    return " ".join(
+        f'<span><i style="background: rgb{rgb}"></i>{html.escape(label)}</span>'
+        for rgb, label in entries
+    )
+
+
 def _size(n: int) -> str:
     for unit, scale in (("MB", 1e6), ("kB", 1e3)):
         if n >= scale:
@@ -506,6 +529,8 @@ caption {{ text-align: left; font-weight: 600; padding: 0.3em 0; }}
 th, td {{ border: 1px solid #ccc; padding: 0.3em 0.6em; text-align: right; }}
 th:first-child, td:first-child {{ text-align: left; }}
 img {{ max-width: 100%; border: 1px solid #eee; }}
+.legend span {{ margin-right: 1em; white-space: nowrap; }}
+.legend i {{ display: inline-block; width: 1.6em; height: 0.6em; margin-right: 0.3em; }}
 </style></head><body>
 <h1>{esc(Path(doc["log"]).name)}</h1>
 <p>log <code>{esc(doc["log"])}</code><br>route <code>{esc(doc["route"])}</code><br>
@@ -513,6 +538,7 @@ img {{ max-width: 100%; border: 1px solid #eee; }}
 (s after start): {outages}</p>
 <p><a href="replay.html"><b>Open the 3D replay</b></a> (play, pause, scrub;
 <code>replay.viser</code> for viser's own player)</p>
+<p class="legend">{_replay_legend()}</p>
 <h2>Metrics over the GNSS-degraded intervals</h2>
 {tables}<p>Match attempts: {matches["attempted"]}, accepted {matches["accepted"]};
 rejected by first failed gate: {rejected}.</p>

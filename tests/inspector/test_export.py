@@ -263,6 +263,7 @@ def test_report_links_every_file(exported):
     rmse = result.metrics["methods"]["proposed"]["route"]["rmse_pos_dev_m"]
     assert "rmse pos dev [m]" in page and f"<td>{rmse:.3f}</td>" in page
     assert "Error against ground truth" in page
+    assert "DR window</span>" in page and "aligned window</span>" in page  # replay legend
 
 
 def _scene(n_matches: int) -> SceneData:
