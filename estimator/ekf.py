@@ -103,6 +103,11 @@ PROBATION_GAP_S = 2.0
 """After this long without a trusted fix, new fixes are on probation (see _robust_check)."""
 AGREE_S = 3.0
 """Fixes on probation are used once they have agreed with each other for this long."""
+WHEEL_GATE = 25.0
+"""Chi-square (1 dof) gate of the wheel-speed row: a slipping or locked wheel disagrees with the
+mechanised forward velocity by metres per second, and the position-velocity correlation of a
+long outage would turn that into tens of metres of position error per update; the wheel row is
+then dropped and the non-holonomic rows still apply."""
 ZUPT_MAX_SPEED = 1.0
 """m/s: a stop is only believed when the filter has slowed down to it (a vehicle cruising on a
 smooth road at constant speed looks as still to the IMU as a parked one)."""
@@ -408,13 +413,31 @@ def inject(x: np.ndarray, dx: np.ndarray) -> None:
 @njit(cache=True, error_model="numpy")
 def _body_velocity_update(x, P, cfg, w_speed, use_wheel, C, H, y, R, PHt, S, Si):
     """Wheel speed (forward = scale * wheel) and the non-holonomic constraint (no lateral or
-    vertical body velocity) as one observation of the body-frame velocity C^T v."""
+    vertical body velocity) as one observation of the body-frame velocity C^T v. Returns
+    whether the wheel row was used (it is gated by :data:`WHEEL_GATE`)."""
     quat_to_dcm(x[X_QUAT : X_QUAT + 4], C)
     v0, v1, v2 = x[X_VEL], x[X_VEL + 1], x[X_VEL + 2]
     # vb = C^T v
     vb0 = C[0, 0] * v0 + C[1, 0] * v1 + C[2, 0] * v2
     vb1 = C[0, 1] * v0 + C[1, 1] * v1 + C[2, 1] * v2
     vb2 = C[0, 2] * v0 + C[1, 2] * v1 + C[2, 2] * v2
+    if use_wheel:
+        # the wheel row alone: h = (c_0 x v, c_0, -w at the scale), innovation variance h P h'
+        h = np.zeros(NE)
+        c0, c1, c2 = C[0, 0], C[1, 0], C[2, 0]
+        h[0] = c1 * v2 - c2 * v1
+        h[1] = c2 * v0 - c0 * v2
+        h[2] = c0 * v1 - c1 * v0
+        h[3], h[4], h[5] = c0, c1, c2
+        h[E_SCALE] = -w_speed
+        s00 = cfg[C_WHEEL_VAR]
+        for i in range(NE):
+            if h[i] != 0.0:
+                for j in range(NE):
+                    s00 += h[i] * P[i, j] * h[j]
+        y0 = x[X_SCALE] * w_speed - vb0
+        if y0 * y0 > WHEEL_GATE * s00:
+            use_wheel = False
     off = 0 if use_wheel else 1
     m = 3 - off
     for a in range(3):
@@ -444,6 +467,7 @@ def _body_velocity_update(x, P, cfg, w_speed, use_wheel, C, H, y, R, PHt, S, Si)
         y[1] = -vb2
     _innovation_cov(P, H, R, m, PHt, S, Si)
     _apply_update(x, P, y, m, PHt, Si, cfg[C_SCALE_ON] > 0)
+    return use_wheel
 
 
 @njit(cache=True, error_model="numpy")
@@ -834,8 +858,7 @@ def run_until(
                 elif j > 0 and j == nw and t - wheel_t[j - 1] <= 0.5 * cfg[C_WHEEL_GAP]:
                     have = True
                     ws = wheel_v[j - 1]
-                _body_velocity_update(x, P, cfg, ws, have, C, H, y, R, PHt, S, Si)
-                if have:
+                if _body_velocity_update(x, P, cfg, ws, have, C, H, y, R, PHt, S, Si):
                     aux[A_N_WHEEL] += 1
                 else:
                     aux[A_N_NHC] += 1
