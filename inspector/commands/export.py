@@ -149,6 +149,8 @@ def execute(args: argparse.Namespace) -> int:
         progress=report,
     )
     m = result.metrics
+    if not m["degraded_intervals"]:
+        print("no GNSS-degraded interval in this log: the metrics are empty (use --outage)")
     for name, row in m["methods"].items():
         r = row["route"]
         rmse = "-" if r["rmse_pos_dev_m"] is None else f"{r['rmse_pos_dev_m']:.2f} m"
