@@ -287,11 +287,16 @@ def headless_server() -> Iterator[Any]:
     """A viser server on a free loopback port, its console banner silenced; stopped on exit."""
     import viser
 
-    with socket.socket() as s:
-        s.bind(("127.0.0.1", 0))
-        port = s.getsockname()[1]
-    with contextlib.redirect_stdout(io.StringIO()):
-        server = viser.ViserServer(host="127.0.0.1", port=port, verbose=False)
+    try:
+        with socket.socket() as s:
+            s.bind(("127.0.0.1", 0))
+            port = s.getsockname()[1]
+        with contextlib.redirect_stdout(io.StringIO()):
+            server = viser.ViserServer(host="127.0.0.1", port=port, verbose=False)
+    except OSError as exc:
+        raise RoutefuseError(
+            "127.0.0.1", f"cannot open a loopback port to record the replay: {exc.strerror or exc}"
+        ) from None
     try:
         yield server
     finally:
