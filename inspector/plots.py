@@ -99,12 +99,12 @@ class DeviationPlot:
         shade = self.outage_mask(xs)
         now = np.full(len(xs), -1.0)
         now[k + 1] = 2.0
-        unit = "m" if which == "position" else "deg"
-        title = (
-            "position deviation from the route"
-            if which == "position"
-            else "heading deviation from the route"
-        )
+        unit = "deg" if which == "heading" else "m"
+        title = {
+            "position": "position deviation from the route",
+            "heading": "heading deviation from the route",
+            "truth": "horizontal error against ground truth",
+        }[which]
         return {
             "data": (xs, yb, yp, shade, now),
             "series": (
