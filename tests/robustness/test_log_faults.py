@@ -1,0 +1,227 @@
+"""Faults inside a log, on the filter side: GNSS multipath jumps at the portals, GNSS returning
+with a large jump, wheel slip and lock, a stop of minutes in a tunnel, a U-turn and detours off
+the route. Every run stays finite, and no match is accepted onto a wrong road: every accepted
+pseudo-position is near the truth, closer than any other road of the scene."""
+
+from __future__ import annotations
+
+import functools
+from dataclasses import replace
+
+import numpy as np
+import pytest
+from _badinputs import base_sim, finite_run
+from _faultdrive import T0, FaultDrive, make_drive, route_along
+
+from estimator.log import Log
+from estimator.params import Params
+from estimator.results import Run
+from estimator.route import Route
+from estimator.runner import run
+
+OPEN_SKY_TURNS = [(0, 0), (10, 0), (12, 3), (25, 3), (27, 0), (40, 0), (42, -3), (55, -3), (57, 0)]
+"""80 s of open sky with a left and a right turn before every fault drive's tunnel (80 s on)"""
+TUNNEL_BEND = [(85, 0), (87, 1), (93, 1), (95, 0)]
+
+
+def _run(log: Log, route: Route, frame, method: str = "proposed") -> Run:
+    result = run(log, route, Params(), method=method, frame=frame)  # type: ignore[arg-type]
+    finite_run(result)
+    return result
+
+
+def _errors(result: Run, truth_at) -> np.ndarray:
+    return np.hypot(*(result.epochs.position[:, :2] - truth_at(result.epochs.t)).T)
+
+
+def _accepted_errors(result: Run, truth_at) -> np.ndarray:
+    acc = [m for m in result.matches if m.accepted]
+    return np.array([float(np.hypot(*(m.pseudo_position - truth_at(m.t)[0]))) for m in acc])
+
+
+# --- the simulator's short tunnel ------------------------------------------------------------
+
+
+def _sim_truth_at(t):
+    sim = base_sim()
+    tt, xy = sim.truth.t, sim.truth.position[:, :2]
+    t = np.atleast_1d(t)
+    return np.column_stack([np.interp(t, tt, xy[:, 0]), np.interp(t, tt, xy[:, 1])])
+
+
+@functools.cache
+def _clean_errors(method: str) -> float:
+    sim = base_sim()
+    return float(_errors(_run(sim.log(), sim.route(), sim.frame, method), _sim_truth_at).max())
+
+
+@pytest.mark.parametrize("method", ["baseline", "proposed"])
+def test_multipath_jumps_at_the_portals_are_gated(method: str) -> None:
+    """Every other fix in the degraded windows before and after the tunnel jumps 27 m: the
+    filter's worst error is that of the clean log (the jumps are gated)."""
+    sim = base_sim()
+    log = sim.log()
+    g = log.gnss
+    near_portal = np.zeros(len(g.t), bool)
+    for a, b in sim.gnss_degraded:
+        near_portal |= (g.t >= a) & (g.t <= b)
+    jump = near_portal & g.valid & (np.arange(len(g.t)) % 2 == 0)
+    assert jump.sum() >= 20
+    enu = sim.frame.to_enu(g.lat, g.lon, g.alt)
+    enu[jump, :2] += [25.0, -10.0]
+    geo = sim.frame.to_geodetic(enu)
+    lat = np.where(g.valid, geo[:, 0], g.lat)
+    lon = np.where(g.valid, geo[:, 1], g.lon)
+    faulty = replace(log, gnss=replace(g, lat=lat, lon=lon))
+    result = _run(faulty, sim.route(), sim.frame, method)
+    assert _errors(result, _sim_truth_at).max() < _clean_errors(method) + 1.0
+    assert np.all(_accepted_errors(result, _sim_truth_at) < 5.0)
+
+
+@pytest.mark.parametrize("method", ["baseline", "proposed"])
+def test_wheel_slip_spikes_and_a_locked_wheel(method: str) -> None:
+    """In the tunnel: +80 % slip for 0.3 s every 2 s and a 0.5 s lock (speed 0 at 15 m/s). A
+    lock once moved the position 85 m backwards (the wheel row is now gated)."""
+    sim = base_sim()
+    log = sim.log()
+    w = log.wheel
+    assert w is not None
+    ((a, b),) = sim.tunnels
+    inside = np.flatnonzero((w.t >= a) & (w.t <= b))
+    speed = w.speed.copy()
+    for k in inside[::100]:
+        speed[k : k + 15] *= 1.8
+    lock = inside[len(inside) // 2]
+    speed[lock : lock + 25] = 0.0
+    result = _run(replace(log, wheel=replace(w, speed=speed)), sim.route(), sim.frame, method)
+    assert _errors(result, _sim_truth_at).max() < _clean_errors(method) + 1.0
+    assert np.all(_accepted_errors(result, _sim_truth_at) < 5.0)
+
+
+# --- drives built from arrays ----------------------------------------------------------------
+
+
+def _with_gyro_z_bias(drive: FaultDrive, a: float, b: float, deg_s: float) -> FaultDrive:
+    """An unmodelled gyro bias between a and b s (the filter cannot have calibrated it)."""
+    gyro = drive.log.imu.gyro.copy()
+    t = drive.log.imu.t - T0
+    gyro[(t > a) & (t < b), 2] += np.radians(deg_s)
+    return replace(drive, log=replace(drive.log, imu=replace(drive.log.imu, gyro=gyro)))
+
+
+@functools.cache
+def _drift_drive(deg_s: float) -> tuple[FaultDrive, Route]:
+    """60 s of tunnel (80-140 s) at 15 m/s with an unmodelled gyro bias: GNSS comes back tens
+    to hundreds of metres from the dead-reckoned position."""
+    drive = make_drive(
+        [(0, 15), (400, 15)], OPEN_SKY_TURNS + TUNNEL_BEND, duration=200, outages=[(80, 140)]
+    )
+    drive = _with_gyro_z_bias(drive, 80, 140, deg_s)
+    return drive, route_along(drive, 0, 200, extend_m=100)
+
+
+def _error_at(result: Run, drive: FaultDrive, t: float) -> float:
+    i = result.epochs.index_at(T0 + t)
+    return float(np.hypot(*(result.epochs.position[i, :2] - drive.truth_at(result.epochs.t[i])[0])))
+
+
+def _errors_between(result: Run, drive: FaultDrive, a: float, b: float) -> np.ndarray:
+    e = result.epochs
+    sel = (e.t >= T0 + a) & (e.t <= T0 + b)
+    return np.hypot(*(e.position[sel, :2] - drive.truth_at(e.t[sel])).T)
+
+
+@pytest.mark.parametrize("method", ["baseline", "proposed"])
+def test_gnss_returning_with_a_large_jump_is_taken(method: str) -> None:
+    """0.15 deg/s of unmodelled gyro bias in a 60 s tunnel: GNSS returns ~60-70 m from the
+    dead-reckoned position. The filter takes the returning fixes (within 3 m inside 20 s) and
+    keeps taking them (never again 20 m off)."""
+    drive, route = _drift_drive(0.15)
+    result = _run(drive.log, route, drive.frame, method)
+    assert _error_at(result, drive, 139.5) > 40.0  # the jump is there
+    assert _errors_between(result, drive, 140.0, 160.0).min() < 3.0
+    assert _errors_between(result, drive, 152.0, 200.0).max() < 20.0
+    # on the right road: across the route every accepted match is where the vehicle is
+    # (along it, the drifted heading's apparent curvature costs up to 16 m: reported)
+    for m in result.matches:
+        if m.accepted:
+            cross = route.project(np.vstack([m.pseudo_position, drive.truth_at(m.t)])).lateral
+            assert abs(cross[0] - cross[1]) < 3.0
+
+
+@pytest.mark.xfail(
+    strict=True,
+    reason="ekf: after GNSS returns, a 9 deg heading error (yaw sigma 0.2 deg) is not "
+    "corrected for a minute: the reset widens only the position, so the error saw-tooths "
+    "1-14 m between resets every ~8 s",
+)
+def test_heading_converges_after_gnss_returns() -> None:
+    drive, route = _drift_drive(0.15)
+    result = _run(drive.log, route, drive.frame, "baseline")
+    assert _errors_between(result, drive, 170.0, 200.0).max() < 3.0
+
+
+@pytest.mark.xfail(
+    strict=True,
+    reason="ekf: with extensions.robust_gnss, fixes returning after an 18 deg heading drift "
+    "never agree with the dead-reckoned motion, so none is used (error 388 m at the end)",
+)
+def test_gnss_returning_after_a_large_heading_drift_is_taken() -> None:
+    drive, route = _drift_drive(0.3)
+    result = _run(drive.log, route, drive.frame, "baseline")
+    assert _error_at(result, drive, 139.5) > 100.0
+    assert _errors_between(result, drive, 160.0, 200.0).max() < 20.0
+
+
+def test_a_three_minute_stop_in_the_tunnel() -> None:
+    """Decelerate to a stop 15 s into the tunnel, stand for 180 s, drive on: the filter stays
+    put while stopped, makes no match attempt then, and leaves the tunnel on the truth."""
+    yaw = [*OPEN_SKY_TURNS, *TUNNEL_BEND, (300, 0), (302, -1), (310, -1), (312, 0)]
+    speed = [(0, 12), (95, 12), (105, 0), (285, 0), (295, 12), (400, 12)]
+    drive = make_drive(speed, yaw, duration=360, outages=[(80, 330)])
+    route = route_along(drive, 0, 360, extend_m=100)
+    result = _run(drive.log, route, drive.frame)
+    e = result.epochs
+    stopped = (e.t > T0 + 107) & (e.t < T0 + 283)
+    assert np.max(np.hypot(*e.velocity[stopped, :2].T)) < 0.05
+    assert np.ptp(e.position[stopped, 0]) < 0.5 and np.ptp(e.position[stopped, 1]) < 0.5
+    assert not [m for m in result.matches if T0 + 107 < m.t < T0 + 283]
+    assert _error_at(result, drive, 330.0) < 3.0
+    assert np.all(_accepted_errors(result, drive.truth_at) < 5.0)
+
+
+def test_a_u_turn_never_matches_the_other_carriageway() -> None:
+    """A U-turn of radius 6 m in the tunnel onto the opposite carriageway (12 m from the way
+    out) of a route drawn as the road's centreline: every accepted match is within 6 m."""
+    yaw = [*OPEN_SKY_TURNS, *TUNNEL_BEND, (106, 0), (106.5, 38.2), (110.712, 38.2), (111.212, 0)]
+    speed = [(0, 12), (100, 12), (106, 4), (111.3, 4), (118, 12), (400, 12)]
+    drive = make_drive(speed, yaw, duration=200, outages=[(80, 170)])
+    route = route_along(drive, 0, 106, offset_m=6.0, extend_m=300)
+    result = _run(drive.log, route, drive.frame)
+    errs = _accepted_errors(result, drive.truth_at)
+    assert len(errs) and np.all(errs < 6.0)
+    after = [m for m in result.matches if m.t > T0 + 112]
+    assert after and not any(m.accepted for m in after)  # driving against the route
+    assert _error_at(result, drive, 170.0) < 5.0
+
+
+@pytest.mark.parametrize("detour", ["side road", "parallel road"])
+def test_a_detour_off_the_route_is_never_matched_onto_the_route(detour: str) -> None:
+    """At 100 s, in the tunnel, the vehicle leaves the route (which goes on straight): onto a
+    side road (90 deg right) or onto a road 40 m to the right, parallel to the route. Once it
+    is 15 m off the route no match is accepted; accepted ones before are within 8 m."""
+    if detour == "side road":
+        turn = [(100, 0), (101, -10), (109, -10), (110, 0)]
+        speed = [(0, 12), (98, 12), (100, 9), (110, 9), (115, 12), (400, 12)]
+    else:
+        turn = [(100, 0), (101, -8), (104, -8), (105, 0), (106, 0), (107, 8), (110, 8), (111, 0)]
+        speed = [(0, 12), (400, 12)]
+    drive = make_drive(
+        speed, OPEN_SKY_TURNS + TUNNEL_BEND + turn, duration=200, outages=[(80, 170)]
+    )
+    route = route_along(drive, 0, 100, extend_m=900)
+    result = _run(drive.log, route, drive.frame)
+    assert np.all(_accepted_errors(result, drive.truth_at) < 8.0)
+    off = [m for m in result.matches if abs(route.project(drive.truth_at(m.t)).lateral[0]) > 15]
+    assert off and not any(m.accepted for m in off)
+    assert _error_at(result, drive, 170.0) < 5.0
