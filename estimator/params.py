@@ -249,6 +249,10 @@ class SensorParams:
     wheel_time_offset_s: float = param(
         0.0, "added to wheel-speed stamps to put them on the IMU clock", unit="s", lo=-2, hi=2,
         step=0.01)
+    truth_time_offset_s: float = param(
+        0.0, "added to ground-truth stamps to put them on the IMU clock (evaluation only: "
+        "truth errors and plots; the filter never reads truth)", unit="s", lo=-2, hi=2,
+        step=0.01)
     initial_heading_deg: float | None = param(
         None, "initial heading (ENU yaw, counter-clockwise from East); None = from GNSS motion",
         unit="deg")
