@@ -11,7 +11,7 @@ from estimator.geo import LocalFrame
 from estimator.log import GnssData, ImuData, Log, TruthData
 from estimator.matching import match_window, project_on_route
 from estimator.metrics import deviation_series, format_table, match_summary, method_metrics
-from estimator.params import Params
+from estimator.params import Params, with_values
 from estimator.results import Epochs, GateDecision, Run
 from estimator.route import Route
 
@@ -139,6 +139,21 @@ def test_truth_errors(heading, lag):
     assert m.truth.rmse_along_m == pytest.approx(3.0, abs=1e-6)
     assert m.truth.rmse_cross_m == pytest.approx(RAMP_RMSE, abs=1e-6)
     assert m.truth.rmse_heading_err_deg == pytest.approx(3.0, abs=1e-6)
+
+
+def test_truth_time_offset_is_applied_before_comparing():
+    """A truth stamped 0.1 s late reads 1 m behind at 10 m/s; sensors.truth_time_offset_s
+    puts it back on the sensors' clock."""
+    t = T0 + np.arange(0.0, 30.0 + 1e-9, 0.1)
+    run = make_run(np.zeros(len(t)), 0.0, t=t)
+    log = make_log()
+    late = replace(log, truth=replace(log.truth, t=log.truth.t + 0.1))
+    m = method_metrics(run, ROUTE, late)
+    assert m.truth.rmse_along_m == pytest.approx(1.0, abs=1e-6)
+    fixed = replace(run, params=with_values(Params(), {"sensors.truth_time_offset_s": -0.1}))
+    m = method_metrics(fixed, ROUTE, late)
+    assert m.truth.rmse_along_m == pytest.approx(0.0, abs=1e-6)
+    assert m.truth.rmse_h_err_m == pytest.approx(0.0, abs=1e-6)
 
 
 def test_truth_decomposition_follows_the_direction_of_travel():
