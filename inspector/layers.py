@@ -296,7 +296,7 @@ class VerdictLayer(Layer):
     def set_data(self, data: SceneData) -> None:
         ok = np.all(np.isfinite(data.match_xy), axis=1) if len(data.match_xy) else np.zeros(0, bool)
         colors = np.where(data.match_accepted[ok, None], ACCEPTED, REJECTED).astype(np.uint8)
-        self._dots("markers", data.match_xy[ok], colors, 7.0, z=0.05)
+        self._dots("markers", data.match_xy[ok], colors, 5.0, z=0.45)
         self._show("markers", bool(ok.any()))
 
 
