@@ -17,12 +17,14 @@ method, not as evidence that a map would help (see docs/validation.md).
 
 from __future__ import annotations
 
+from pathlib import Path
 from typing import Any
 
 import numpy as np
 from numpy.typing import ArrayLike, NDArray
 
 from .geo import LocalFrame
+from .log import Log
 
 F64 = NDArray[np.float64]
 
@@ -170,3 +172,35 @@ def route_geojson(
             }
         ],
     }
+
+
+def route_from_gnss(
+    log: Log,
+    *,
+    name: str,
+    average: int = 5,
+    sigma_m: float = 3.0,
+    spacing_m: float = 5.0,
+    dp_tol_m: float = 0.3,
+    extend_m: float = 20.0,
+) -> dict[str, Any]:
+    """A route from a log's own valid GNSS fixes (``average``-fix moving average first), for a
+    log that has neither a route nor a ground truth to derive one from. No lateral offset: the
+    vehicle drove on the line it defines. The route shares the fixes' wander, so it is not an
+    independent map (see the module docstring)."""
+    g = log.gnss
+    ok = g.valid
+    if ok.sum() < 2:
+        raise ValueError(f"{log.path}: fewer than two valid GNSS fixes: no route can be built")
+    ll = moving_average(np.column_stack([g.lat[ok], g.lon[ok]]), average)
+    return route_geojson(
+        ll[:, 0],
+        ll[:, 1],
+        name=name,
+        derived_from=f"{Path(log.path).name}: valid GNSS fixes, {average}-fix moving average",
+        sigma_m=sigma_m,
+        offset_left_m=0.0,
+        spacing_m=spacing_m,
+        dp_tol_m=dp_tol_m,
+        extend_m=extend_m,
+    )

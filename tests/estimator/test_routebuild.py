@@ -75,3 +75,26 @@ def test_geojson_round_trip_in_lon_lat():
     back = frame.to_enu(coords[:, 1], coords[:, 0])[:, :2]
     proj = Route(back).project(_arc_track()[5:-5])
     assert np.max(np.abs(proj.lateral)) < 0.6
+
+
+def test_route_from_a_logs_gnss_follows_its_fixes():
+    from estimator.log import GnssData, ImuData, Log
+    from estimator.routebuild import route_from_gnss
+
+    frame = LocalFrame(42.3765, -71.1474, 0.0)
+    xy = _arc_track(noise=0.5, seed=1)
+    geo = frame.to_geodetic(np.column_stack([xy, np.zeros(len(xy))]))
+    n = len(xy)
+    status = np.ones(n, np.int8)
+    status[::10] = -1  # no-fix epochs are skipped
+    geo[::10, :2] = np.nan
+    t = np.arange(n, dtype=float)
+    gnss = GnssData(t, geo[:, 0], geo[:, 1], geo[:, 2], status, np.ones((n, 3)))
+    log = Log("lot.bag", ImuData(t, np.zeros((n, 3)), np.zeros((n, 3))), gnss)
+    gj = route_from_gnss(log, name="lot", extend_m=10.0)
+    props = gj["features"][0]["properties"]
+    assert props["lateral_offset_m"] == 0.0 and "lot.bag" in props["derived_from"]
+    coords = np.array(gj["features"][0]["geometry"]["coordinates"])
+    back = frame.to_enu(coords[:, 1], coords[:, 0])[:, :2]
+    lateral = Route(back).project(_arc_track()[10:-10]).lateral
+    assert np.sqrt(np.mean(lateral**2)) < 0.5
