@@ -17,6 +17,7 @@ COMMANDS = (
     "estimator.commands.simulate",
     "inspector.commands.serve",
     "inspector.commands.export",
+    "inspector.commands.bench",
 )
 
 
@@ -30,8 +31,9 @@ def build_parser() -> argparse.ArgumentParser:
         description="Keep a ground vehicle localised through GNSS outages by matching the shape "
         "of its dead-reckoned track to the mission route, and inspect every match in a browser.",
     )
-    parser.add_argument("--debug", action="store_true",
-                        help="show the full traceback on unexpected errors")
+    parser.add_argument(
+        "--debug", action="store_true", help="show the full traceback on unexpected errors"
+    )
     sub = parser.add_subparsers(dest="command", metavar="COMMAND", required=True)
     for mod in _modules():
         p = sub.add_parser(mod.NAME, help=mod.HELP, description=mod.HELP)
@@ -54,8 +56,11 @@ def main(argv: Sequence[str] | None = None) -> int:
     except Exception as exc:
         if args.debug or os.environ.get("ROUTEFUSE_DEBUG"):
             raise
-        print(f"routefuse: internal error: {type(exc).__name__}: {exc} "
-              "(run with --debug for the traceback)", file=sys.stderr)
+        print(
+            f"routefuse: internal error: {type(exc).__name__}: {exc} "
+            "(run with --debug for the traceback)",
+            file=sys.stderr,
+        )
         return 1
 
 
