@@ -103,6 +103,13 @@ PROBATION_GAP_S = 2.0
 """After this long without a trusted fix, new fixes are on probation (see _robust_check)."""
 AGREE_S = 3.0
 """Fixes on probation are used once they have agreed with each other for this long."""
+IMU_GAP_S = 5.0
+"""An IMU interval longer than this (a logging gap) is not integrated: rates held for minutes
+turn the attitude into noise. The state is carried across unchanged and the next fix widens
+the position covariance to cover wherever the vehicle went meanwhile."""
+GAP_VEL_VAR = 5.0**2
+GAP_YAW_VAR = (math.pi / 4) ** 2
+"""Velocity and yaw variance added across a logging gap: the vehicle may have turned."""
 WHEEL_GATE = 25.0
 """Chi-square (1 dof) gate of the wheel-speed row: a slipping or locked wheel disagrees with the
 mechanised forward velocity by metres per second, and the position-velocity correlation of a
@@ -770,6 +777,12 @@ def run_until(
         if idx[I_OUT] >= out.shape[0] - 2:
             return STATUS_FULL
         dt = t - aux[A_TIME]
+        if dt > IMU_GAP_S:
+            dt = 0.0
+            aux[A_INFLATE] = 1.0
+            for i in range(3):
+                P[E_VEL + i, E_VEL + i] += GAP_VEL_VAR
+            P[E_ATT + 2, E_ATT + 2] += GAP_YAW_VAR
         # --- mechanisation: mid-point rates, velocity with the mid-interval attitude
         wm0 = 0.5 * (aux[A_PREV_GYRO] + gyro[k, 0]) - x[X_BG]
         wm1 = 0.5 * (aux[A_PREV_GYRO + 1] + gyro[k, 1]) - x[X_BG + 1]
