@@ -281,7 +281,10 @@ def test_a_failing_open_from_the_picker_keeps_the_session(page, inspector):
     _, controller, _ = inspector
     before = controller.session
     pg.get_by_role("tab", name="Files").click()
-    view.log_choice.value = "extra0/broken.mcap"  # what picking it in the dropdown does
+    uid = pg.locator("label", has_text=re.compile(r"^log$")).first.get_attribute("for")
+    pg.locator(f"[id='{uid}']").click()
+    pg.get_by_role("option", name="extra0/broken.mcap").click()
+    _wait(lambda: view.log_choice.value == "extra0/broken.mcap", 10, "the pick to arrive")
     _click(pg, "open")
     _wait(lambda: _notified(pg, "Kept the previous session"), 30, "the notification")
     assert "broken.mcap" in pg.inner_text("body")
