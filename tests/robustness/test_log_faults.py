@@ -13,7 +13,7 @@ import pytest
 from _badinputs import base_sim, finite_run
 from _faultdrive import T0, FaultDrive, make_drive, route_along
 
-from estimator.log import Log
+from estimator.log import GnssData, ImuData, Log, WheelData
 from estimator.params import Params
 from estimator.results import Run
 from estimator.route import Route
@@ -22,6 +22,7 @@ from estimator.runner import run
 OPEN_SKY_TURNS = [(0, 0), (10, 0), (12, 3), (25, 3), (27, 0), (40, 0), (42, -3), (55, -3), (57, 0)]
 """80 s of open sky with a left and a right turn before every fault drive's tunnel (80 s on)"""
 TUNNEL_BEND = [(85, 0), (87, 1), (93, 1), (95, 0)]
+GNSS_FIELDS = ("t", "lat", "lon", "alt", "status", "cov_enu")
 
 
 def _run(log: Log, route: Route, frame, method: str = "proposed") -> Run:
@@ -225,3 +226,74 @@ def test_a_detour_off_the_route_is_never_matched_onto_the_route(detour: str) -> 
     off = [m for m in result.matches if abs(route.project(drive.truth_at(m.t)).lateral[0]) > 15]
     assert off and not any(m.accepted for m in off)
     assert _error_at(result, drive, 170.0) < 5.0
+
+
+@pytest.mark.parametrize("moved", [False, True])
+def test_a_ten_minute_gap_in_all_sensors(moved: bool) -> None:
+    """Every sensor silent for 600 s at 100 s. Paused: the drive goes on where it stopped.
+    Moved: the vehicle drove 7 km and turned 30 deg meanwhile. Integrating the first IMU
+    interval after the gap once left roll 36 deg, pitch -41 deg and the position 150 km off."""
+    yaw = [*OPEN_SKY_TURNS, (300, 0), (310, 9), (320, 0), (500, 0), (510, -6), (520, 0)]
+    drive = make_drive([(0, 12), (800, 12)], yaw, duration=780 if moved else 180)
+    log = drive.log
+
+    def gap(t: np.ndarray) -> np.ndarray:
+        return (t > T0 + 100) & (t < T0 + 700) if moved else np.zeros(len(t), bool)
+
+    def shift(t: np.ndarray) -> np.ndarray:
+        return t if moved else np.where(t > T0 + 100, t + 600.0, t)
+
+    imu, gnss, wheel = log.imu, log.gnss, log.wheel
+    assert wheel is not None
+    ki, kg, kw = ~gap(imu.t), ~gap(gnss.t), ~gap(wheel.t)
+    cut = replace(
+        log,
+        imu=replace(imu, t=shift(imu.t[ki]), gyro=imu.gyro[ki], accel=imu.accel[ki]),
+        gnss=replace(
+            gnss,
+            t=shift(gnss.t[kg]),
+            lat=gnss.lat[kg],
+            lon=gnss.lon[kg],
+            alt=gnss.alt[kg],
+            status=gnss.status[kg],
+            cov_enu=gnss.cov_enu[kg],
+        ),
+        wheel=replace(wheel, t=shift(wheel.t[kw]), speed=wheel.speed[kw]),
+    )
+    result = run(cut, None, Params(), method="baseline", frame=drive.frame)
+    finite_run(result)
+    assert any("IMU gaps longer than 1 s (largest 600.0 s)" in w for w in result.warnings)
+    e = result.epochs
+    truth_t = e.t if moved else np.where(e.t > T0 + 700, e.t - 600.0, e.t)
+    err = np.hypot(*(e.position[:, :2] - drive.truth_at(truth_t)).T)
+    after = e.t > T0 + 700
+    assert np.all(np.abs(e.attitude[after, :2]) < np.radians(5))  # level, not tumbled
+    assert err[after & (e.t < T0 + 712)].min() < 10.0  # the position comes back with GNSS
+    if not moved:
+        assert err[after].max() < 2.0
+    else:
+        # the 30 deg heading change is learnt slowly (reported): a bounded saw-tooth
+        assert err[e.t > T0 + 712].max() < 150.0
+
+
+@pytest.mark.xfail(
+    strict=True,
+    reason="ekf: after a gap in which the vehicle turned 30 deg, the heading is re-learnt "
+    "slowly (still 12 deg off 80 s later): position resets every few seconds, errors up to 95 m",
+)
+def test_heading_is_reacquired_after_a_gap_in_which_the_vehicle_turned() -> None:
+    yaw = [*OPEN_SKY_TURNS, (300, 0), (310, 9), (320, 0), (500, 0), (510, -6), (520, 0)]
+    drive = make_drive([(0, 12), (800, 12)], yaw, duration=780)
+    log = drive.log
+    keep = [~((d.t > T0 + 100) & (d.t < T0 + 700)) for d in (log.imu, log.gnss, log.wheel)]
+    imu, gnss, wheel = log.imu, log.gnss, log.wheel
+    cut = replace(
+        log,
+        imu=ImuData(imu.t[keep[0]], imu.gyro[keep[0]], imu.accel[keep[0]]),
+        gnss=GnssData(*(getattr(gnss, f)[keep[1]] for f in GNSS_FIELDS)),
+        wheel=WheelData(wheel.t[keep[2]], wheel.speed[keep[2]]),
+    )
+    result = run(cut, None, Params(), method="baseline", frame=drive.frame)
+    e = result.epochs
+    err = np.hypot(*(e.position[:, :2] - drive.truth_at(e.t)).T)
+    assert err[e.t > T0 + 730].max() < 5.0
