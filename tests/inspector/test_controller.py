@@ -211,3 +211,35 @@ def test_time_is_relative_to_the_log_start():
     assert tl.t[0] == 0.0
     assert tl.match_t[0] == pytest.approx(40.0)
     assert make_run().t0 == T0
+
+
+SAMPLES = Path(__file__).resolve().parents[2] / "sample_logs"
+
+
+@pytest.mark.slow
+def test_real_sample_loads_and_a_gate_change_reruns_only_what_changed():
+    if not (SAMPLES / "long_tunnel.mcap").exists():
+        pytest.skip("sample_logs/long_tunnel.mcap is not generated yet")
+    errors: list[RoutefuseError] = []
+    c = Controller(DataFolders.of(SAMPLES))
+    try:
+        c.subscribe(on_error=errors.append)
+        c.open_named("sample_logs/long_tunnel.mcap", "sample_logs/long_tunnel.route.geojson")
+        assert c.wait_idle(300) and not errors
+        s = c.session
+        assert s.baseline.method == "baseline" and s.proposed.method == "proposed"
+        assert s.timeline.n_frames == len(s.proposed.epochs.t) > 1000
+        assert len(s.timeline.match_t) == len(s.scene.matches) > 10
+        assert s.scene.truth is not None and len(s.scene.gnss_fixes) > 100
+        rows = dict((q, (b, p)) for q, b, p in s.metrics)
+        assert float(rows["position deviation RMSE [m]"][1]) < float(
+            rows["position deviation RMSE [m]"][0]
+        )  # the route constraint helps on its own sample
+        c.set_param("gates.min_pairs", 500)  # more pairs than any window has
+        assert c.wait_idle(300) and not errors
+        s2 = c.session
+        assert s2.inputs is s.inputs  # the log was not read again
+        assert not s2.timeline.match_accepted.any()
+        assert s2.timeline.t[0] == s.timeline.t[0]  # same clock: tabs keep their time
+    finally:
+        c.close()
