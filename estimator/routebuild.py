@@ -180,7 +180,7 @@ def route_from_gnss(
     name: str,
     average: int = 5,
     sigma_m: float = 3.0,
-    spacing_m: float = 5.0,
+    spacing_m: float = 25.0,
     dp_tol_m: float = 0.3,
     extend_m: float = 20.0,
 ) -> dict[str, Any]:

@@ -91,7 +91,7 @@ def test_route_from_a_logs_gnss_follows_its_fixes():
     t = np.arange(n, dtype=float)
     gnss = GnssData(t, geo[:, 0], geo[:, 1], geo[:, 2], status, np.ones((n, 3)))
     log = Log("lot.bag", ImuData(t, np.zeros((n, 3)), np.zeros((n, 3))), gnss)
-    gj = route_from_gnss(log, name="lot", extend_m=10.0)
+    gj = route_from_gnss(log, name="lot", extend_m=10.0, spacing_m=5.0)
     props = gj["features"][0]["properties"]
     assert props["lateral_offset_m"] == 0.0 and "lot.bag" in props["derived_from"]
     coords = np.array(gj["features"][0]["geometry"]["coordinates"])
