@@ -218,19 +218,18 @@ def test_enu_round_trip_and_rigidity_near_poles_and_antimeridian(lat0, lon0, h0,
 @FAST
 @given(seed=SEEDS, n=st.integers(2, 40), search=st.floats(5.0, 300.0), g=st.floats(0, 1))
 def test_windowed_projection_is_the_nearest_point_of_the_window(seed, n, search, g) -> None:
-    """With ``s_guess``/``search_m`` the foot is the nearest point among the segments that
-    overlap [guess - search, guess + search]: never outside them, never farther than the
-    nearest of them, never nearer than the global nearest."""
+    """With ``s_guess``/``search_m`` the foot is the nearest point of the stretch of route
+    within [guess - search, guess + search] (clipped inside long segments): never outside it,
+    never farther than its nearest point, never nearer than the global nearest."""
     rng = np.random.default_rng(seed)
     route = Route(_polyline(rng, n))
     guess = g * route.length
     pts = rng.uniform(route.xy.min(0) - 30, route.xy.max(0) + 30, (15, 2))
     proj = route.project(pts, np.full(len(pts), guess), search)
     glob = route.project(pts)
-    lo = max(int(np.searchsorted(route.s, guess - search, side="right")) - 1, 0)
-    hi = min(int(np.searchsorted(route.s, guess + search, side="right")) - 1, len(route.xy) - 2)
-    window = route.xy[lo : hi + 2]
-    assert np.all(proj.s >= route.s[lo] - 1e-9) and np.all(proj.s <= route.s[hi + 1] + 1e-9)
+    s_lo, s_hi = max(guess - search, 0.0), min(guess + search, route.length)
+    window = route.segment(s_lo, s_hi)
+    assert np.all(proj.s >= s_lo - 1e-9) and np.all(proj.s <= s_hi + 1e-9)
     for p, d, dg in zip(pts, proj.distance, glob.distance, strict=True):
         assert abs(d - _distance_to_polyline(window, p)) < 1e-6
         assert d >= dg - 1e-9
