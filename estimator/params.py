@@ -47,14 +47,24 @@ class TriggerParams:
     """When a route match is attempted (the paper's trigger control)."""
 
     min_outage_s: float = param(
-        4.0, "GNSS must be absent this long before the first match", unit="s", lo=0, hi=120,
-        step=0.5)
+        4.0,
+        "GNSS must be absent this long before the first match",
+        unit="s",
+        lo=0,
+        hi=120,
+        step=0.5,
+    )
     min_outage_distance_m: float = param(
-        40.0, "DR distance driven inside the outage before the first match", unit="m", lo=0,
-        hi=1000, step=5)
+        40.0,
+        "DR distance driven inside the outage before the first match",
+        unit="m",
+        lo=0,
+        hi=1000,
+        step=5,
+    )
     interval_s: float = param(
-        1.0, "time between two match attempts (low-rate updates)", unit="s", lo=0.1, hi=30,
-        step=0.1)
+        1.0, "time between two match attempts (low-rate updates)", unit="s", lo=0.1, hi=30, step=0.1
+    )
 
 
 @dataclass(frozen=True)
@@ -62,20 +72,58 @@ class WindowParams:
     """The DR window and the local route segment it is matched to."""
 
     length_m: float = param(
-        250.0, "arc length of the DR window matched to the route", unit="m", lo=20, hi=3000,
-        step=10)
+        250.0, "arc length of the DR window matched to the route", unit="m", lo=20, hi=3000, step=10
+    )
     spacing_m: float = param(
-        5.0, "spatial resampling interval of window and route segment", unit="m", lo=0.5, hi=50,
-        step=0.5)
+        5.0,
+        "spatial resampling interval of window and route segment",
+        unit="m",
+        lo=0.5,
+        hi=50,
+        step=0.5,
+    )
     route_search_m: float = param(
-        60.0, "arc-length search radius around the previous route projection", unit="m", lo=5,
-        hi=2000, step=5)
+        60.0,
+        "arc-length search radius around the previous route projection",
+        unit="m",
+        lo=5,
+        hi=2000,
+        step=5,
+    )
     along_search_m: float = param(
-        30.0, "half-width of the along-track offset search of the route segment", unit="m",
-        lo=1, hi=300, step=1)
+        30.0,
+        "half-width of the along-track offset search of the route segment",
+        unit="m",
+        lo=1,
+        hi=300,
+        step=1,
+    )
     along_search_step_m: float = param(
-        1.0, "grid step of the along-track offset search (refined by a parabola)", unit="m",
-        lo=0.1, hi=10, step=0.1)
+        1.0,
+        "grid step of the along-track offset search (refined by a parabola)",
+        unit="m",
+        lo=0.1,
+        hi=10,
+        step=0.1,
+    )
+    long_length_m: float = param(
+        1000.0,
+        "arc length of the longer window tried when the standard one leaves along-track "
+        "unobserved (extensions.long_window): a gentle bend is seen whole",
+        unit="m",
+        lo=20,
+        hi=5000,
+        step=50,
+    )
+    long_max_turn_deg: float = param(
+        10.0,
+        "the longer window is only tried where no window.length_m stretch of it turns more "
+        "than this (sharper bends the standard window observes itself)",
+        unit="deg",
+        lo=0,
+        hi=180,
+        step=1,
+    )
 
 
 @dataclass(frozen=True)
@@ -84,26 +132,52 @@ class GateParams:
 
     min_pairs: int = param(20, "minimum number of valid point pairs", lo=3, hi=500, step=1)
     max_heading_diff_deg: float = param(
-        10.0, "terminal heading gate: angle between DR and route end directions (signed cos)",
-        unit="deg", lo=0.5, hi=90, step=0.5)
+        10.0,
+        "terminal heading gate: angle between DR and route end directions (signed cos)",
+        unit="deg",
+        lo=0.5,
+        hi=90,
+        step=0.5,
+    )
     max_residual_m: float = param(
-        3.0, "RMS registration residual after the rigid fit", unit="m", lo=0.1, hi=50, step=0.1)
+        3.0, "RMS registration residual after the rigid fit", unit="m", lo=0.1, hi=50, step=0.1
+    )
     max_correction_m: float = param(
-        30.0, "cap on a single correction |z - p_dr|", unit="m", lo=0.5, hi=500, step=0.5)
+        30.0, "cap on a single correction |z - p_dr|", unit="m", lo=0.5, hi=500, step=0.5
+    )
     max_rotation_deg: float = param(
-        15.0, "largest fitted rotation accepted", unit="deg", lo=0.5, hi=180, step=0.5)
+        15.0, "largest fitted rotation accepted", unit="deg", lo=0.5, hi=180, step=0.5
+    )
     mahalanobis_chi2: float = param(
-        13.8, "chi-square gate on the match innovation, S = P_EN + R_k (2 dof; 13.8 = 99.9 %)",
-        lo=1, hi=1000, step=0.5)
+        13.8,
+        "chi-square gate on the match innovation, S = P_EN + R_k (2 dof; 13.8 = 99.9 %)",
+        lo=1,
+        hi=1000,
+        step=0.5,
+    )
     max_lateral_jump_m: float = param(
-        5.0, "largest move of the vehicle across the route away from its learned lane offset",
-        unit="m", lo=0.5, hi=100, step=0.5)
+        5.0,
+        "largest move of the vehicle across the route away from its learned lane offset",
+        unit="m",
+        lo=0.5,
+        hi=100,
+        step=0.5,
+    )
     alternative_shift_m: float = param(
-        25.0, "lateral shift of the rival route segments (a parallel road or bore)", unit="m",
-        lo=2, hi=200, step=1)
+        25.0,
+        "lateral shift of the rival route segments (a parallel road or bore)",
+        unit="m",
+        lo=2,
+        hi=200,
+        step=1,
+    )
     alternative_margin: float = param(
-        2.0, "how much worse (chi-square units) every rival must fit than the candidate",
-        lo=0, hi=100, step=0.5)
+        2.0,
+        "how much worse (chi-square units) every rival must fit than the candidate",
+        lo=0,
+        hi=100,
+        step=0.5,
+    )
 
 
 @dataclass(frozen=True)
@@ -111,21 +185,46 @@ class PseudoObsParams:
     """The E/N pseudo-position observation."""
 
     sigma_m: float = param(
-        2.0, "1-sigma of the pseudo-position (the paper's conservative, isotropic R)", unit="m",
-        lo=0.05, hi=100, step=0.05)
+        2.0,
+        "1-sigma of the pseudo-position (the paper's conservative, isotropic R)",
+        unit="m",
+        lo=0.05,
+        hi=100,
+        step=0.05,
+    )
     cross_sigma_m: float = param(
-        1.0, "cross-track 1-sigma when R follows route geometry (raised to the fit residual)",
-        unit="m", lo=0.05, hi=100, step=0.05)
+        1.0,
+        "cross-track 1-sigma when R follows route geometry (raised to the fit residual)",
+        unit="m",
+        lo=0.05,
+        hi=100,
+        step=0.05,
+    )
     along_sigma_min_m: float = param(
-        0.5, "smallest along-track 1-sigma derived from route shape", unit="m", lo=0.01, hi=100,
-        step=0.05)
+        0.5,
+        "smallest along-track 1-sigma derived from route shape",
+        unit="m",
+        lo=0.01,
+        hi=100,
+        step=0.05,
+    )
     along_sigma_max_m: float = param(
-        100.0, "along-track 1-sigma where route shape does not observe it (straight road)",
-        unit="m", lo=1, hi=10000, step=1)
+        100.0,
+        "along-track 1-sigma where route shape does not observe it (straight road)",
+        unit="m",
+        lo=1,
+        hi=10000,
+        step=1,
+    )
     shape_noise_m: float = param(
-        1.0, "per-point noise of DR and route shape (map error, corner cutting) assumed when "
-        "deriving the along-track sigma and comparing rivals", unit="m", lo=0.01, hi=20,
-        step=0.05)
+        1.0,
+        "per-point noise of DR and route shape (map error, corner cutting) assumed when "
+        "deriving the along-track sigma and comparing rivals",
+        unit="m",
+        lo=0.01,
+        hi=20,
+        step=0.05,
+    )
 
 
 @dataclass(frozen=True)
@@ -134,10 +233,11 @@ class OffsetParams:
 
     enabled: bool = param(True, "add the learned lateral lane offset to the pseudo-position")
     time_constant_s: float = param(
-        20.0, "averaging time constant of the learned offset", unit="s", lo=0.5, hi=600, step=0.5)
+        20.0, "averaging time constant of the learned offset", unit="s", lo=0.5, hi=600, step=0.5
+    )
     max_offset_m: float = param(
-        8.0, "offsets larger than this are not learned (off-route)", unit="m", lo=0, hi=50,
-        step=0.5)
+        8.0, "offsets larger than this are not learned (off-route)", unit="m", lo=0, hi=50, step=0.5
+    )
 
 
 @dataclass(frozen=True)
@@ -145,18 +245,31 @@ class ExtensionParams:
     """routefuse's additions beyond the paper; each can be switched off (``--method paper``)."""
 
     geometry_covariance: bool = param(
-        True, "observation covariance follows route geometry (along-track weak on straights)")
+        True, "observation covariance follows route geometry (along-track weak on straights)"
+    )
     candidate_validation: bool = param(
-        True, "reject candidates that fit worse than shifted/reversed alternatives, or whose "
-        "innovation is improbable (Mahalanobis)")
+        True,
+        "reject candidates that fit worse than shifted/reversed alternatives, or whose "
+        "innovation is improbable (Mahalanobis)",
+    )
     along_track_search: bool = param(
-        True, "search the route arc-length offset that minimises the residual")
+        True, "search the route arc-length offset that minimises the residual"
+    )
     lane_path_matching: bool = param(
-        True, "register the window to the route shifted by the learned lane offset (the lane's "
-        "own arc length on curves) instead of adding the offset after the fit")
+        True,
+        "register the window to the route shifted by the learned lane offset (the lane's "
+        "own arc length on curves) instead of adding the offset after the fit",
+    )
+    long_window: bool = param(
+        True,
+        "where the standard window sees too little of the road's shape to fix along-track "
+        "position (a straight, or a bend gentler than the window), also try a "
+        "window.long_length_m window and use it if it passes every gate and observes along-track",
+    )
     heading_observation: bool = param(False, "feed the fitted rotation as a heading observation")
     robust_gnss: bool = param(
-        True, "test fixes against dead-reckoned motion; drop disagreeing fixes before outages")
+        True, "test fixes against dead-reckoned motion; drop disagreeing fixes before outages"
+    )
     wheel_scale_state: bool = param(True, "estimate the wheel-speed scale factor as a state")
 
 
@@ -165,103 +278,203 @@ class NoiseParams:
     """Sensor noise and filter tuning (SI units except where the unit says otherwise)."""
 
     gyro_arw_deg_sqrt_h: float = param(
-        0.3, "gyro angle random walk", unit="deg/sqrt(h)", lo=0.001, hi=100, step=0.01)
+        0.3, "gyro angle random walk", unit="deg/sqrt(h)", lo=0.001, hi=100, step=0.01
+    )
     accel_vrw_m_s_sqrt_h: float = param(
-        0.2, "accelerometer velocity random walk", unit="m/s/sqrt(h)", lo=0.001, hi=100,
-        step=0.01)
+        0.2, "accelerometer velocity random walk", unit="m/s/sqrt(h)", lo=0.001, hi=100, step=0.01
+    )
     gyro_bias_sigma_deg_h: float = param(
-        10.0, "gyro bias instability (Gauss-Markov sigma)", unit="deg/h", lo=0.01, hi=1000,
-        step=0.5)
+        10.0, "gyro bias instability (Gauss-Markov sigma)", unit="deg/h", lo=0.01, hi=1000, step=0.5
+    )
     gyro_bias_tau_s: float = param(
-        3600.0, "gyro bias correlation time", unit="s", lo=1, hi=100000, step=10)
+        3600.0, "gyro bias correlation time", unit="s", lo=1, hi=100000, step=10
+    )
     accel_bias_sigma_mg: float = param(
-        2.0, "accelerometer bias instability (Gauss-Markov sigma)", unit="mg", lo=0.001, hi=100,
-        step=0.1)
+        2.0,
+        "accelerometer bias instability (Gauss-Markov sigma)",
+        unit="mg",
+        lo=0.001,
+        hi=100,
+        step=0.1,
+    )
     accel_bias_tau_s: float = param(
-        3600.0, "accelerometer bias correlation time", unit="s", lo=1, hi=100000, step=10)
+        3600.0, "accelerometer bias correlation time", unit="s", lo=1, hi=100000, step=10
+    )
     wheel_speed_sigma_m_s: float = param(
-        0.1, "wheel speed observation 1-sigma", unit="m/s", lo=0.001, hi=5, step=0.01)
+        0.1, "wheel speed observation 1-sigma", unit="m/s", lo=0.001, hi=5, step=0.01
+    )
     nhc_sigma_m_s: float = param(
-        0.1, "non-holonomic constraint 1-sigma (lateral and vertical body velocity)",
-        unit="m/s", lo=0.001, hi=5, step=0.01)
+        0.1,
+        "non-holonomic constraint 1-sigma (lateral and vertical body velocity)",
+        unit="m/s",
+        lo=0.001,
+        hi=5,
+        step=0.01,
+    )
     gnss_sigma_floor_m: float = param(
-        0.5, "smallest GNSS horizontal 1-sigma trusted, whatever the message claims", unit="m",
-        lo=0.01, hi=50, step=0.05)
+        0.5,
+        "smallest GNSS horizontal 1-sigma trusted, whatever the message claims",
+        unit="m",
+        lo=0.01,
+        hi=50,
+        step=0.05,
+    )
     gnss_chi2_gate: float = param(
-        16.0, "chi-square gate on the GNSS innovation, tested on horizontal (2 dof) and "
-        "vertical (1 dof) separately", lo=1, hi=1000, step=0.5)
+        16.0,
+        "chi-square gate on the GNSS innovation, tested on horizontal (2 dof) and "
+        "vertical (1 dof) separately",
+        lo=1,
+        hi=1000,
+        step=0.5,
+    )
     gnss_sigma_default_m: float = param(
-        3.0, "GNSS horizontal 1-sigma assumed when the message carries no covariance "
-        "(vertical: twice this)", unit="m", lo=0.05, hi=100, step=0.1)
+        3.0,
+        "GNSS horizontal 1-sigma assumed when the message carries no covariance "
+        "(vertical: twice this)",
+        unit="m",
+        lo=0.05,
+        hi=100,
+        step=0.1,
+    )
     gnss_reset_after_s: float = param(
-        5.0, "after fixes have been rejected this long in a row, the position covariance is "
-        "widened so GNSS is trusted again", unit="s", lo=0.5, hi=600, step=0.5)
+        5.0,
+        "after fixes have been rejected this long in a row, the position covariance is "
+        "widened so GNSS is trusted again",
+        unit="s",
+        lo=0.5,
+        hi=600,
+        step=0.5,
+    )
     gnss_wander_fraction: float = param(
-        0.8, "fraction of the typical fix variance that wanders slowly (a Gauss-Markov state "
-        "of the filter); the rest of each fix's variance is white", lo=0, hi=0.99, step=0.05)
+        0.8,
+        "fraction of the typical fix variance that wanders slowly (a Gauss-Markov state "
+        "of the filter); the rest of each fix's variance is white",
+        lo=0,
+        hi=0.99,
+        step=0.05,
+    )
     gnss_wander_tau_s: float = param(
-        60.0, "correlation time of the GNSS wander", unit="s", lo=1, hi=3600, step=5)
+        60.0, "correlation time of the GNSS wander", unit="s", lo=1, hi=3600, step=5
+    )
     wheel_scale_sigma: float = param(
-        0.01, "initial 1-sigma of the wheel-speed scale factor error", lo=0, hi=0.2,
-        step=0.001)
+        0.01, "initial 1-sigma of the wheel-speed scale factor error", lo=0, hi=0.2, step=0.001
+    )
     gyro_bias_init_sigma_deg_h: float = param(
-        100.0, "initial 1-sigma of the gyro bias (turn-on bias of automotive MEMS)",
-        unit="deg/h", lo=0.01, hi=10000, step=1)
+        100.0,
+        "initial 1-sigma of the gyro bias (turn-on bias of automotive MEMS)",
+        unit="deg/h",
+        lo=0.01,
+        hi=10000,
+        step=1,
+    )
     accel_bias_init_sigma_mg: float = param(
-        10.0, "initial 1-sigma of the accelerometer bias", unit="mg", lo=0.001, hi=500,
-        step=0.5)
+        10.0, "initial 1-sigma of the accelerometer bias", unit="mg", lo=0.001, hi=500, step=0.5
+    )
     velocity_init_sigma_m_s: float = param(
-        0.5, "initial 1-sigma of the velocity", unit="m/s", lo=0.001, hi=20, step=0.05)
+        0.5, "initial 1-sigma of the velocity", unit="m/s", lo=0.001, hi=20, step=0.05
+    )
     zupt_speed_m_s: float = param(
-        0.05, "wheel speed below which the vehicle counts as stopped", unit="m/s", lo=0,
-        hi=2, step=0.01)
+        0.05,
+        "wheel speed below which the vehicle counts as stopped",
+        unit="m/s",
+        lo=0,
+        hi=2,
+        step=0.01,
+    )
     zupt_gyro_deg_s: float = param(
-        1.0, "mean |gyro| over 0.5 s below which the vehicle may count as stopped",
-        unit="deg/s", lo=0, hi=20, step=0.1)
+        1.0,
+        "mean |gyro| over 0.5 s below which the vehicle may count as stopped",
+        unit="deg/s",
+        lo=0,
+        hi=20,
+        step=0.1,
+    )
     zupt_accel_std_m_s2: float = param(
-        0.05, "std of |accel| over 0.5 s below which a log without wheel speed counts as "
-        "stopped", unit="m/s^2", lo=0, hi=5, step=0.01)
+        0.05,
+        "std of |accel| over 0.5 s below which a log without wheel speed counts as stopped",
+        unit="m/s^2",
+        lo=0,
+        hi=5,
+        step=0.01,
+    )
     zupt_sigma_m_s: float = param(
-        0.02, "zero-velocity update 1-sigma", unit="m/s", lo=0.001, hi=1, step=0.005)
+        0.02, "zero-velocity update 1-sigma", unit="m/s", lo=0.001, hi=1, step=0.005
+    )
     aid_rate_hz: float = param(
-        10.0, "rate of the wheel-speed, non-holonomic and zero-velocity updates", unit="Hz",
-        lo=0.5, hi=200, step=0.5)
+        10.0,
+        "rate of the wheel-speed, non-holonomic and zero-velocity updates",
+        unit="Hz",
+        lo=0.5,
+        hi=200,
+        step=0.5,
+    )
     propagation_interval_s: float = param(
-        0.02, "covariance propagation interval (the state is propagated at every IMU sample)",
-        unit="s", lo=0.0, hi=0.2, step=0.005)
+        0.02,
+        "covariance propagation interval (the state is propagated at every IMU sample)",
+        unit="s",
+        lo=0.0,
+        hi=0.2,
+        step=0.005,
+    )
 
 
 @dataclass(frozen=True)
 class SensorParams:
     """Mounting and timing: what a real log needs to be configured with."""
 
-    imu_roll_deg: float = param(0.0, "IMU-to-body rotation: roll", unit="deg", lo=-180, hi=180,
-                                step=0.1)
-    imu_pitch_deg: float = param(0.0, "IMU-to-body rotation: pitch", unit="deg", lo=-90, hi=90,
-                                 step=0.1)
-    imu_yaw_deg: float = param(0.0, "IMU-to-body rotation: yaw", unit="deg", lo=-180, hi=180,
-                               step=0.1)
+    imu_roll_deg: float = param(
+        0.0, "IMU-to-body rotation: roll", unit="deg", lo=-180, hi=180, step=0.1
+    )
+    imu_pitch_deg: float = param(
+        0.0, "IMU-to-body rotation: pitch", unit="deg", lo=-90, hi=90, step=0.1
+    )
+    imu_yaw_deg: float = param(
+        0.0, "IMU-to-body rotation: yaw", unit="deg", lo=-180, hi=180, step=0.1
+    )
     gnss_lever_arm_m: tuple[float, float, float] = param(
-        (0.0, 0.0, 0.0), "GNSS antenna position in the body frame (forward, left, up)", unit="m")
+        (0.0, 0.0, 0.0), "GNSS antenna position in the body frame (forward, left, up)", unit="m"
+    )
     gnss_time_offset_s: float = param(
-        0.0, "added to GNSS stamps to put them on the IMU clock", unit="s", lo=-2, hi=2,
-        step=0.01)
+        0.0, "added to GNSS stamps to put them on the IMU clock", unit="s", lo=-2, hi=2, step=0.01
+    )
     wheel_time_offset_s: float = param(
-        0.0, "added to wheel-speed stamps to put them on the IMU clock", unit="s", lo=-2, hi=2,
-        step=0.01)
+        0.0,
+        "added to wheel-speed stamps to put them on the IMU clock",
+        unit="s",
+        lo=-2,
+        hi=2,
+        step=0.01,
+    )
     truth_time_offset_s: float = param(
-        0.0, "added to ground-truth stamps to put them on the IMU clock (evaluation only: "
-        "truth errors and plots; the filter never reads truth)", unit="s", lo=-2, hi=2,
-        step=0.01)
+        0.0,
+        "added to ground-truth stamps to put them on the IMU clock (evaluation only: "
+        "truth errors and plots; the filter never reads truth)",
+        unit="s",
+        lo=-2,
+        hi=2,
+        step=0.01,
+    )
     initial_heading_deg: float | None = param(
-        None, "initial heading (ENU yaw, counter-clockwise from East); None = from GNSS motion",
-        unit="deg")
+        None,
+        "initial heading (ENU yaw, counter-clockwise from East); None = from GNSS motion",
+        unit="deg",
+    )
     align_distance_m: float = param(
-        10.0, "GNSS fixes at least this far apart give the initial heading", unit="m", lo=1,
-        hi=200, step=1)
+        10.0,
+        "GNSS fixes at least this far apart give the initial heading",
+        unit="m",
+        lo=1,
+        hi=200,
+        step=1,
+    )
     gnss_gap_s: float = param(
-        1.0, "no valid fix for longer than this is a GNSS-degraded interval", unit="s",
-        lo=0.1, hi=60, step=0.1)
+        1.0,
+        "no valid fix for longer than this is a GNSS-degraded interval",
+        unit="s",
+        lo=0.1,
+        hi=60,
+        step=0.1,
+    )
 
 
 @dataclass(frozen=True)
@@ -277,8 +490,8 @@ class Params:
     noise: NoiseParams = field(default_factory=NoiseParams)
     sensors: SensorParams = field(default_factory=SensorParams)
     output_rate_hz: float = param(
-        20.0, "rate of the per-epoch results kept for inspection", unit="Hz", lo=1, hi=200,
-        step=1)
+        20.0, "rate of the per-epoch results kept for inspection", unit="Hz", lo=1, hi=200, step=1
+    )
 
 
 @dataclass(frozen=True)
@@ -308,9 +521,17 @@ def param_specs(cls: type = Params, prefix: str = "") -> Iterator[ParamSpec]:
         default = f.default if f.default is not dataclasses.MISSING else f.default_factory()  # type: ignore[misc]
         m = f.metadata
         yield ParamSpec(
-            name=f"{prefix}{f.name}", group=prefix.rstrip(".") or "general", type=tp,
-            default=default, doc=m.get("doc", ""), unit=m.get("unit", ""), lo=m.get("lo"),
-            hi=m.get("hi"), step=m.get("step"), choices=m.get("choices") or _literal(tp))
+            name=f"{prefix}{f.name}",
+            group=prefix.rstrip(".") or "general",
+            type=tp,
+            default=default,
+            doc=m.get("doc", ""),
+            unit=m.get("unit", ""),
+            lo=m.get("lo"),
+            hi=m.get("hi"),
+            step=m.get("step"),
+            choices=m.get("choices") or _literal(tp),
+        )
 
 
 def _literal(tp: Any) -> tuple[str, ...] | None:

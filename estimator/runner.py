@@ -31,7 +31,7 @@ from . import ekf
 from .errors import LogError, RoutefuseError
 from .geo import LocalFrame
 from .log import Log
-from .matching import learn_lane_offset, match_window, route_arc_length
+from .matching import learn_lane_offset, match_window, resample_polyline, route_arc_length
 from .params import Method, Params, for_method
 from .results import Epochs, MatchRecord, Run
 from .route import Route
@@ -669,12 +669,12 @@ class _Driver:
             s_guess=tr.s,
         )
 
-    def _window(self, out: F64, n_out: int, x: F64, aux: F64) -> F64:
-        """The DR track over the last ``window.length_m`` of travel, integrated from the
-        mechanised velocity only (no correction jumps), translated to end at the estimate."""
+    def _window(self, out: F64, n_out: int, x: F64, aux: F64, length_m: float) -> F64:
+        """The DR track over the last ``length_m`` of travel, integrated from the mechanised
+        velocity only (no correction jumps), translated to end at the estimate."""
         dist = out[:n_out, ekf.O_DIST]
         d_now = float(aux[ekf.A_DIST])
-        i0 = max(int(np.searchsorted(dist, d_now - self.p.window.length_m, side="right")) - 1, 0)
+        i0 = max(int(np.searchsorted(dist, d_now - length_m, side="right")) - 1, 0)
         dr = np.vstack([out[i0:n_out, ekf.O_DR : ekf.O_DR + 2], aux[ekf.A_DR : ekf.A_DR + 2]])
         d = np.r_[dist[i0:], d_now]
         keep = np.r_[np.diff(d) > 1e-6, True]
@@ -682,21 +682,64 @@ class _Driver:
         return dr + (x[:2] - aux[ekf.A_DR : ekf.A_DR + 2])
 
     def _match(self, out: F64, n_out: int, x: F64, P: F64, aux: F64) -> MatchRecord:
-        """One attempt's match (P must be propagated to the attempt time)."""
+        """One attempt's match (P must be propagated to the attempt time).
+
+        A bend much gentler than the window (an expressway's 12 deg over 500 m) has no shape
+        inside a 250 m window: sliding along an arc is a rotation, which the rigid fit absorbs,
+        so along-track stays unobserved however long the tunnel. Seen whole in a longer window
+        the bend is a corner, whose place along the road the fit finds. The longer window only
+        replaces an accepted standard match that left along-track unobserved, only where the
+        road is gentle (no standard-length stretch of it turns more than
+        ``window.long_max_turn_deg``: sharper bends the standard window observes itself, and over
+        a long window they make the fit depend on how well the map's arc length matches the
+        lane's), and only if it passes every gate itself (``extensions.long_window``)."""
         tr = self.track
         pred = None if tr.s is None else tr.s + (aux[ekf.A_DIST] - tr.s_dist)
-        return match_window(
-            self._window(out, n_out, x, aux),
-            x[:2].copy(),
-            P[6:8, 6:8].copy(),
-            self.route,
-            s_guess=pred,
-            lane_offset=tr.lane,
-            params=self.p,
-            index=len(self.records),
-            t=float(aux[ekf.A_TIME]),
-            epoch=n_out,
+        w = self.p.window
+
+        def attempt(window_xy: F64, params: Params) -> MatchRecord:
+            return match_window(
+                window_xy,
+                x[:2].copy(),
+                P[6:8, 6:8].copy(),
+                self.route,
+                s_guess=pred,
+                lane_offset=tr.lane,
+                params=params,
+                index=len(self.records),
+                t=float(aux[ekf.A_TIME]),
+                epoch=n_out,
+            )
+
+        rec = attempt(self._window(out, n_out, x, aux, w.length_m), self.p)
+        if not (
+            self.p.extensions.long_window
+            and w.long_length_m > w.length_m
+            and rec.accepted
+            and not rec.extra.get("along_observed", 1.0)
+        ):
+            return rec
+        long_xy = self._window(out, n_out, x, aux, w.long_length_m)
+        turn = _max_turn_deg(long_xy, w.length_m, w.spacing_m)
+        if turn > w.long_max_turn_deg:
+            return rec
+        # map and DR shape errors are correlated over tens of metres: the long window's points
+        # count as many as the standard window's, not as independent extra information
+        po = self.p.pseudo
+        noise = po.shape_noise_m * math.sqrt(w.long_length_m / w.length_m)
+        long = attempt(
+            long_xy,
+            dataclasses.replace(self.p, pseudo=dataclasses.replace(po, shape_noise_m=noise)),
         )
+        if not (long.accepted and long.extra.get("along_observed", 0.0)):
+            return rec
+        extra = {
+            **long.extra,
+            "long_window": 1.0,
+            "long_window_turn_deg": turn,
+            "short_window_length_m": rec.extra.get("window_length_m", w.length_m),
+        }
+        return dataclasses.replace(long, extra=extra)
 
     def _after_match(self, rec: MatchRecord, x_after: F64, aux: F64) -> None:
         if rec.accepted:
@@ -870,6 +913,20 @@ class _Driver:
             gnss_used=o[:, ekf.O_GNSS] > 0,
             degraded=degraded,
         )
+
+
+def _max_turn_deg(xy: F64, stretch_m: float, spacing_m: float) -> float:
+    """The largest heading change over any ``stretch_m`` of a polyline, in degrees."""
+    pts = resample_polyline(xy, spacing_m, anchor="end")
+    if len(pts) < 3:
+        return 0.0
+    d = np.diff(pts, axis=0)
+    heading = np.unwrap(np.arctan2(d[:, 1], d[:, 0]))
+    n = max(round(stretch_m / spacing_m), 1)
+    if len(heading) <= n:
+        return float(np.degrees(np.ptp(heading)))
+    win = np.lib.stride_tricks.sliding_window_view(heading, n + 1)
+    return float(np.degrees(np.max(win.max(axis=1) - win.min(axis=1))))
 
 
 def _heading_observation(rec: MatchRecord, p: Params) -> tuple[float, float] | None:
