@@ -1,0 +1,106 @@
+"""The real logs of ../shared/data end to end, with the example configs in sample_logs/configs
+(docs/validation.md has the full tables, from scripts/validate_real.py)."""
+
+from __future__ import annotations
+
+import json
+from pathlib import Path
+
+import numpy as np
+import pytest
+
+from estimator.bagio import load_log
+from estimator.inputs import open_inputs
+from estimator.metrics import match_summary, method_metrics
+from estimator.params import Params, load_params
+from estimator.routebuild import route_from_gnss
+from estimator.runner import run
+
+REPO = Path(__file__).resolve().parents[2]
+DATA = REPO.parent / "shared" / "data"
+COMMA = DATA / "comma2k19" / "i280.mcap"
+COMMA_ROUTE = DATA / "comma2k19" / "i280_route.geojson"
+HUSKY = DATA / "robot_localization" / "test1.bag"
+CONFIGS = REPO / "sample_logs" / "configs"
+
+needs_comma = pytest.mark.skipif(
+    not (COMMA.exists() and COMMA_ROUTE.exists()), reason=f"real data not found: {COMMA}"
+)
+needs_husky = pytest.mark.skipif(not HUSKY.exists(), reason=f"real data not found: {HUSKY}")
+
+
+def test_example_configs_load_and_say_what_the_data_notes_say():
+    comma = load_params(CONFIGS / "comma2k19_i280.toml")
+    assert comma.sensors.imu_pitch_deg == -3.8  # nose-down
+    assert comma.sensors.truth_time_offset_s == pytest.approx(-0.1)
+    husky = load_params(CONFIGS / "husky_test1.toml")
+    assert (husky.sensors.imu_roll_deg, husky.sensors.imu_yaw_deg) == (90.0, -90.0)
+    assert husky.noise.gyro_arw_deg_sqrt_h > Params().noise.gyro_arw_deg_sqrt_h
+    for path in CONFIGS.glob("*.toml"):
+        text = path.read_text(encoding="utf-8")
+        # every value carries a reason: a comment line right above it
+        lines = text.splitlines()
+        for i, line in enumerate(lines):
+            if "=" in line and not line.lstrip().startswith("#"):
+                above = [ln for ln in lines[max(0, i - 12) : i] if ln.strip()]
+                assert any(ln.lstrip().startswith("#") for ln in above), f"{path.name}: {line}"
+
+
+@needs_comma
+def test_comma_i280_outage_proposed_no_worse_than_baseline_against_truth():
+    """The shortest real case: 20 s without GNSS on I-280 (straight road, only cross-track is
+    observable), with the example config."""
+    inputs = open_inputs(COMMA, COMMA_ROUTE)
+    params = load_params(CONFIGS / "comma2k19_i280.toml")
+    outage = [(20.0, 40.0)]
+    base = run(inputs.log, inputs.route, params, method="baseline", outages=outage)
+    prop = run(inputs.log, inputs.route, params, method="proposed", outages=outage, reuse=base)
+    assert base.degraded_intervals and prop.degraded_intervals == base.degraded_intervals
+    mb = method_metrics(base, inputs.route, inputs.log, params=base.params)
+    mp = method_metrics(prop, inputs.route, inputs.log, params=prop.params)
+    assert mb.truth is not None and mp.truth is not None
+    assert min(mb.n_epochs, mp.n_epochs) > 300  # 20 s at 20 Hz (plus rows at match attempts)
+    summary = match_summary(prop)
+    assert summary["accepted"] >= 5, summary
+    assert mp.truth.rmse_h_err_m <= mb.truth.rmse_h_err_m
+    assert mp.truth.max_h_err_m <= mb.truth.max_h_err_m
+    # the route only observes cross-track on a straight road: that is where the gain is
+    assert mp.truth.rmse_cross_m < mb.truth.rmse_cross_m
+    assert mp.truth.rmse_along_m <= mb.truth.rmse_along_m + 0.1
+
+
+@needs_comma
+def test_comma_truth_offset_removes_the_timing_floor():
+    """With every fix, the filter against truth: the configured -0.1 s truth offset removes
+    most of the along-track error the truth's late stamps create."""
+    inputs = open_inputs(COMMA, COMMA_ROUTE)
+    params = load_params(CONFIGS / "comma2k19_i280.toml")
+    r = run(inputs.log, None, params, method="baseline")
+    whole = [(r.t0 + 2.0, r.t0 + 60.0)]
+    on = method_metrics(r, inputs.route, inputs.log, intervals=whole, params=params)
+    off_params = load_params(CONFIGS / "comma2k19_i280.toml")
+    from dataclasses import replace
+
+    r_off = replace(r, params=replace(off_params, sensors=Params().sensors))
+    off = method_metrics(r_off, inputs.route, inputs.log, intervals=whole)
+    assert on.truth.rmse_along_m < 0.6 * off.truth.rmse_along_m
+
+
+@needs_husky
+def test_husky_with_its_config_runs_level_and_matches_its_derived_route(tmp_path):
+    """The rotated IMU (no tf in the bag) made level by the config; a route from its own GNSS;
+    a long outage with matches accepted."""
+    log = load_log(HUSKY)
+    route_path = tmp_path / "husky.route.geojson"
+    route_path.write_text(json.dumps(route_from_gnss(log, name="husky")), encoding="utf-8")
+    inputs = open_inputs(HUSKY, route_path)
+    params = load_params(CONFIGS / "husky_test1.toml")
+    r = run(inputs.log, inputs.route, params, method="proposed", outages=[(20.0, 260.0)])
+    roll, pitch = np.degrees(r.epochs.attitude[:, 0]), np.degrees(r.epochs.attitude[:, 1])
+    assert np.percentile(np.abs(roll), 95) < 5 and np.percentile(np.abs(pitch), 95) < 5
+    dist = float(np.sum(np.hypot(*np.diff(r.epochs.position[:, :2], axis=0).T)))
+    assert 330 < dist < 400  # 358.9 m by wheel odometry (data notes)
+    assert match_summary(r)["accepted"] > 0
+    # without the rotation gravity lies on the body y axis: the filter is far from level
+    unrotated = run(inputs.log, None, Params(), method="baseline")
+    assert np.median(np.abs(np.degrees(unrotated.epochs.attitude[:, 0]))) > 45
