@@ -66,6 +66,7 @@ A_CHAIN_T = 47  # the run's last fix: time, E, N, DR E, DR N
 A_CHAIN_POS = 48  # (2)
 A_CHAIN_DR = 50  # (2)
 A_N_GNSS_SUSPECT = 52
+A_USED_DIST = 53  # A_DIST at the last fix used
 NA = 56
 
 # idx
@@ -524,6 +525,26 @@ def _widen_position(P, y, S):
 
 
 @njit(cache=True, error_model="numpy")
+def _widen_heading(x, P, y, aux):
+    """Widen yaw and horizontal velocity variance by the heading error that explains the fix's
+    horizontal innovation over the distance driven since the last fix used (a heading error
+    grown linearly over D puts the vehicle about theta * D / 2 off). Widening only the position
+    would leave a filter that claims a tenth of a degree of yaw with a heading ten degrees off:
+    each later fix then pulls the position back and the heading drags it away again."""
+    dist = aux[A_DIST] - aux[A_USED_DIST]
+    if dist < 1.0:
+        return
+    theta = min(2.0 * math.hypot(y[0], y[1]) / dist, math.pi / 4)
+    var_yaw = theta * theta
+    if var_yaw <= P[E_ATT + 2, E_ATT + 2]:
+        return
+    P[E_ATT + 2, E_ATT + 2] += var_yaw
+    speed2 = x[X_VEL] * x[X_VEL] + x[X_VEL + 1] * x[X_VEL + 1]
+    for a in range(2):
+        P[E_VEL + a, E_VEL + a] += speed2 * var_yaw
+
+
+@njit(cache=True, error_model="numpy")
 def _robust_check(aux, cfg, t_fix, e, n, dr_e, dr_n, nis_typical):
     """Robust GNSS: is a fix trusted? Returns 0 (use it as it is), 1 (it disagrees with the
     filter: inflate its covariance by its innovation) or -1 (on probation: do not use it).
@@ -531,16 +552,19 @@ def _robust_check(aux, cfg, t_fix, e, n, dr_e, dr_n, nis_typical):
     ``nis_typical`` is the horizontal innovation tested against the filter's covariance plus
     the *typical* white variance of the log's fixes, not the variance the fix reports: at tunnel
     portals receivers report metre-level sigmas for jumps of 5-15 m. Fixes are also chained by
-    the dead-reckoned motion between consecutive fixes (good to centimetres over a fraction of a
-    second): after a gap of more than PROBATION_GAP_S (an outage) fixes are not used until they
-    have agreed with each other for AGREE_S, and a chain that agrees that long is trusted even
-    if it disagrees with the filter (then the filter was wrong)."""
+    the distance dead reckoning drove between consecutive fixes (good to centimetres over a
+    fraction of a second, and blind to the heading error DR may have gathered in a long outage,
+    which would otherwise make every returning fix 'disagree'): after a gap of more than
+    PROBATION_GAP_S (an outage) fixes are not used until they have agreed with each other for
+    AGREE_S, and a chain that agrees that long is trusted even if it disagrees with the filter
+    (then the filter was wrong)."""
     ct = aux[A_CHAIN_T]
     chain_ok = False
     if ct > 0 and t_fix - ct <= CHAIN_GAP_S:
-        de = e - (aux[A_CHAIN_POS] + dr_e - aux[A_CHAIN_DR])
-        dn = n - (aux[A_CHAIN_POS + 1] + dr_n - aux[A_CHAIN_DR + 1])
-        chain_ok = (de * de + dn * dn) / (2.0 * cfg[C_WHITE_VAR]) <= CHAIN_GATE
+        step_fix = math.hypot(e - aux[A_CHAIN_POS], n - aux[A_CHAIN_POS + 1])
+        step_dr = math.hypot(dr_e - aux[A_CHAIN_DR], dr_n - aux[A_CHAIN_DR + 1])
+        d = step_fix - step_dr
+        chain_ok = d * d / (2.0 * cfg[C_WHITE_VAR]) <= CHAIN_GATE
     if not chain_ok:
         aux[A_CHAIN_T0] = t_fix
     aux[A_CHAIN_T] = t_fix
@@ -602,6 +626,7 @@ def _gnss_update(x, P, aux, cfg, t, t_fix, pos, var, C, H, y, R, PHt, S, Si):
     if not widen and aux[A_REJECT_SINCE] >= 0 and t - aux[A_REJECT_SINCE] > cfg[C_RESET_S]:
         widen = True
     if widen:
+        _widen_heading(x, P, y, aux)
         _widen_position(P, y, S)
         _innovation_cov(P, H, R, 3, PHt, S, Si)
         aux[A_INFLATE] = 0.0
@@ -620,6 +645,7 @@ def _gnss_update(x, P, aux, cfg, t, t_fix, pos, var, C, H, y, R, PHt, S, Si):
         _innovation_cov(P, H, R, 2, PHt, S, Si)
     _apply_update(x, P, y, m, PHt, Si, cfg[C_SCALE_ON] > 0)
     aux[A_N_GNSS_USED] += 1
+    aux[A_USED_DIST] = aux[A_DIST]
     return 1
 
 

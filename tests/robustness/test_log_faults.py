@@ -150,23 +150,12 @@ def test_gnss_returning_with_a_large_jump_is_taken(method: str) -> None:
             assert abs(cross[0] - cross[1]) < 3.0
 
 
-@pytest.mark.xfail(
-    strict=True,
-    reason="ekf: after GNSS returns, a 9 deg heading error (yaw sigma 0.2 deg) is not "
-    "corrected for a minute: the reset widens only the position, so the error saw-tooths "
-    "1-14 m between resets every ~8 s",
-)
 def test_heading_converges_after_gnss_returns() -> None:
     drive, route = _drift_drive(0.15)
     result = _run(drive.log, route, drive.frame, "baseline")
     assert _errors_between(result, drive, 170.0, 200.0).max() < 3.0
 
 
-@pytest.mark.xfail(
-    strict=True,
-    reason="ekf: with extensions.robust_gnss, fixes returning after an 18 deg heading drift "
-    "never agree with the dead-reckoned motion, so none is used (error 388 m at the end)",
-)
 def test_gnss_returning_after_a_large_heading_drift_is_taken() -> None:
     drive, route = _drift_drive(0.3)
     result = _run(drive.log, route, drive.frame, "baseline")
@@ -276,11 +265,6 @@ def test_a_ten_minute_gap_in_all_sensors(moved: bool) -> None:
         assert err[e.t > T0 + 712].max() < 150.0
 
 
-@pytest.mark.xfail(
-    strict=True,
-    reason="ekf: after a gap in which the vehicle turned 30 deg, the heading is re-learnt "
-    "slowly (still 12 deg off 80 s later): position resets every few seconds, errors up to 95 m",
-)
 def test_heading_is_reacquired_after_a_gap_in_which_the_vehicle_turned() -> None:
     yaw = [*OPEN_SKY_TURNS, (300, 0), (310, 9), (320, 0), (500, 0), (510, -6), (520, 0)]
     drive = make_drive([(0, 12), (800, 12)], yaw, duration=780)
