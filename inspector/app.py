@@ -110,6 +110,18 @@ def match_markdown(
     return "\n".join(lines)
 
 
+def status_markdown(s: Session) -> str:
+    """The status line of a session: files, length, attempts, and the off-route summary."""
+    tl = s.timeline
+    text = (
+        f"**{s.log_name}** · route **{s.route_name}** · {tl.duration:.0f} s, "
+        f"{tl.n_frames} frames, {len(tl.match_t)} match attempts "
+        f"({int((~tl.match_accepted).sum())} rejected)"
+    )
+    off = s.off_route.summary() if s.off_route is not None else ""
+    return f"{text} · {off}" if off else text
+
+
 class ClientView:
     """One browser tab: its GUI, its scene layers and its own playhead."""
 
@@ -508,12 +520,7 @@ class ClientView:
                 self.layers.set_data(session.scene)
                 self.time_slider.max = max(tl.duration, dt)
                 self.time_slider.step = round(max(dt, 1e-3), 3)
-                self.status.content = (
-                    f"**{session.log_name}** · route **{session.route_name}** · "
-                    f"{tl.duration:.0f} s, {tl.n_frames} frames, "
-                    f"{len(tl.match_t)} match attempts "
-                    f"({int((~tl.match_accepted).sum())} rejected)"
-                )
+                self.status.content = status_markdown(session)
                 self.metrics.content = metrics_markdown(session.metrics, session.method)
                 self._set_plots(session)
                 self.sync_params()
@@ -552,6 +559,29 @@ class ClientView:
             else:
                 h.data = kw["data"]
                 h.visible = True
+        self._set_off_route_plot(session)
+
+    def _set_off_route_plot(self, session: Session) -> None:
+        """The vehicle's distance from the route with the off-route spans shaded."""
+        h = self.plots.get("off_route")
+        if session.off_route is None:
+            if h is not None:
+                h.visible = False
+            return
+        kw = session.off_route.uplot(self.playhead.t)
+        if h is None:
+            with self.plots_tab:
+                self.plots["off_route"] = self.client.gui.add_uplot(
+                    kw["data"],
+                    kw["series"],
+                    scales=kw["scales"],
+                    title=kw["title"],
+                    aspect=2.2,
+                    order=self.metrics.order - 0.25,
+                )
+        else:
+            h.data = kw["data"]
+            h.visible = True
 
     def sync_params(self) -> None:
         """Show the controller's parameters (after another tab changed them, or a failure)."""
@@ -582,26 +612,32 @@ class ClientView:
             self.layers.draw(t + data.t0)
             frame = tl.frame_at(t)
             gnss = "missing" if s.proposed.epochs.degraded[frame] else "ok"
+            off = s.off_route.frame_text(t) if s.off_route is not None else ""
             self.frame_label.content = (
                 f"**frame {frame + 1} / {tl.n_frames}** · t = {tl.t[frame]:.2f} s · GNSS {gnss}"
+                + (f" · {off}" if off else "")
             )
             self.time_slider.value = float(np.clip(round(t, 3), 0, self.time_slider.max))
             i = tl.match_at(t)
-            key = (s.version, i)
+            off_head = s.off_route.panel_text(t, i) if s.off_route is not None else ""
+            key = (s.version, i, off_head)
             if key != self._shown_match:
                 self._shown_match = key
                 m = s.proposed.matches[i] if i is not None else None
-                self.match_panel.content = match_markdown(
+                panel = match_markdown(
                     m,
                     t_rel=None if i is None else float(tl.match_t[i]),
                     age_s=0.0 if i is None else t - float(tl.match_t[i]),
                     total=len(tl.match_t),
                 )
+                self.match_panel.content = f"{off_head}\n\n{panel}" if off_head else panel
             if self._plot_t is None or abs(self._plot_t - t) > tl.duration / 800:
                 self._plot_t = t
                 for which, h in self.plots.items():
                     if which in s.deviation.kinds:
                         h.data = s.deviation.uplot(which, t)["data"]
+                    elif which == "off_route" and s.off_route is not None:
+                        h.data = s.off_route.uplot(t)["data"]
             if self.follow:
                 self._follow(data, t)
 
@@ -629,12 +665,7 @@ class ClientView:
         s = self.session
         if s is None:
             return
-        tl = s.timeline
-        self.status.content = (
-            f"**{s.log_name}** · route **{s.route_name}** · {tl.duration:.0f} s, "
-            f"{tl.n_frames} frames, {len(tl.match_t)} match attempts "
-            f"({int((~tl.match_accepted).sum())} rejected)"
-        )
+        self.status.content = status_markdown(s)
 
     def refresh_files(self) -> None:
         listing = self.app.controller.folders.listing()

@@ -308,6 +308,8 @@ class Session:
     deviation: Any
     """:class:`inspector.plots.DeviationPlot` of both runs"""
     timings: dict[str, float] = field(default_factory=dict)
+    off_route: Any = None
+    """:class:`inspector.offroute.OffRoute` of the proposed run (None for hand-built sessions)"""
 
 
 @dataclass(frozen=True)
@@ -676,6 +678,9 @@ class Controller:
             baseline=baseline, proposed=proposed, route=inputs.route, log=inputs.log
         )
         deviation = DeviationPlot.build(inputs, baseline, proposed)
+        from .offroute import OffRoute
+
+        off_route = OffRoute.build(scene, inputs.route, req.params)
         metrics = metrics_rows(inputs, baseline, proposed)
         timings["views_s"] = time.perf_counter() - t3
         self._emit(0, 1.0, "done")
@@ -695,4 +700,5 @@ class Controller:
             metrics=metrics,
             deviation=deviation,
             timings=timings,
+            off_route=off_route,
         )

@@ -1,0 +1,129 @@
+"""The off-route state, server side: a drive that leaves its route (a side road in a tunnel,
+built like the robustness tests' detours) run through the controller with the real estimator;
+the session knows when the vehicle is off the route, and the status line, the frame label, the
+match panel and the plot say so."""
+
+from __future__ import annotations
+
+import sys
+from dataclasses import dataclass, replace
+from pathlib import Path
+
+import numpy as np
+import pytest
+
+sys.path.insert(0, str(Path(__file__).resolve().parents[1] / "robustness"))
+from _faultdrive import T0, make_drive, route_along
+
+from estimator.geo import LocalFrame
+from estimator.log import TruthData
+from estimator.params import Params
+from estimator.route import Route
+from inspector.controller import Controller, DataFolders
+from inspector.offroute import OffRoute, off_route_threshold
+
+OPEN_SKY_TURNS = [(0, 0), (10, 0), (12, 3), (25, 3), (27, 0), (40, 0), (42, -3), (55, -3), (57, 0)]
+TUNNEL_BEND = [(85, 0), (87, 1), (93, 1), (95, 0)]
+SIDE_ROAD = [(100, 0), (101, -10), (109, -10), (110, 0)]
+"""at 100 s, in the tunnel (80-170 s), the vehicle turns 90 deg right; the route goes on"""
+
+
+@dataclass(frozen=True)
+class _Inputs:
+    log: object
+    route: Route
+    frame: LocalFrame
+
+
+@pytest.fixture(scope="module")
+def detour_session(tmp_path_factory):
+    speed = [(0, 12), (98, 12), (100, 9), (110, 9), (115, 12), (400, 12)]
+    drive = make_drive(speed, OPEN_SKY_TURNS + TUNNEL_BEND + SIDE_ROAD, duration=200,
+                       outages=[(80, 170)])  # fmt: skip
+    geo = drive.frame.to_geodetic(np.column_stack([drive.xy, np.zeros(len(drive.t))]))
+    truth = TruthData(drive.t, geo[:, 0], geo[:, 1], geo[:, 2], drive.yaw)
+    log = replace(drive.log, truth=truth)
+    route = route_along(drive, 0, 100, extend_m=900)
+    inputs = _Inputs(log, route, drive.frame)
+    d = tmp_path_factory.mktemp("detour")
+    controller = Controller(
+        DataFolders.of(d), opener=lambda *_: inputs, params=Params(), method="proposed"
+    )
+    try:
+        controller.open(d / "detour.mcap", d / "detour.geojson")
+        assert controller.wait_idle(300)
+        assert controller.session is not None, "the detour did not run"
+        yield controller.session, drive
+    finally:
+        controller.close()
+
+
+def test_the_session_knows_when_the_vehicle_leaves_the_route(detour_session):
+    session, drive = detour_session
+    off = session.off_route
+    assert isinstance(off, OffRoute) and off.source == "truth"
+    assert off.threshold_m == off_route_threshold(session.params) == 8.0
+    # on the route for the first 100 s (the route is the truth path, 1.75 m to the left)
+    before = off.t < 100.0
+    assert np.nanmax(off.distance_m[before]) < 3.0 and not off.off[before].any()
+    # after the side road the truth is far from the route: one span, from ~102 s to the end
+    assert len(off.spans) == 1
+    a, b = off.spans[0]
+    assert 100.0 < a < 106.0 and b > 195.0
+    assert off.at(150.0)[0] and off.at(150.0)[1] > 100.0
+    assert not off.at(50.0)[0]
+    # agrees with a plain projection of the truth onto the route
+    i = off.index_at(150.0)
+    p = drive.truth_at(T0 + off.t[i])
+    assert abs(float(abs(session.inputs.route.project(p).lateral[0])) - off.distance_m[i]) < 1.0
+
+
+def test_no_match_is_accepted_while_off_route_and_refusals_are_named(detour_session):
+    session, _ = detour_session
+    off = session.off_route
+    t_rel = np.array([m.t - session.proposed.t0 for m in session.proposed.matches])
+    during = [i for i, t in enumerate(t_rel) if off.at(t)[0]]
+    assert during, "no attempt while off the route"
+    assert not any(session.proposed.matches[i].accepted for i in during)
+    for i, m in enumerate(session.proposed.matches):
+        gate = off.refused[i]
+        assert (gate is not None) == (
+            not m.accepted
+            and m.failed_gates[0].name.startswith(("lane_continuity", "alternative_"))
+        )
+
+
+def test_status_frame_label_panel_and_plot_say_off_route(detour_session):
+    from inspector.app import status_markdown
+
+    session, _ = detour_session
+    off = session.off_route
+    assert "OFF-ROUTE" in status_markdown(session)
+    assert "OFF-ROUTE" in off.frame_text(150.0) and off.frame_text(50.0) == ""
+    i = session.timeline.match_at(150.0)
+    head = off.panel_text(150.0, i)
+    assert head.startswith("**OFF-ROUTE**") and "from the route" in head
+    assert "OFF-ROUTE" not in off.panel_text(50.0, session.timeline.match_at(50.0))
+    kw = off.uplot(150.0)
+    xs, dist, limit, band, now = kw["data"]
+    assert np.nanmax(dist[xs > 120]) > 100.0 and np.nanmax(dist[xs < 90]) < 3.0
+    assert len({len(a) for a in kw["data"]}) == 1 and len(kw["series"]) == 5
+    assert band[xs > 120].min() == 1.0 and band[xs < 90].max() == 0.0
+    assert np.all(limit == off.threshold_m) and now.max() == 2.0
+
+
+def test_on_route_session_has_no_off_route_state():
+    """The proposed track (no truth) on a route it follows: never off-route."""
+    from fake_runs import make_route, make_run
+
+    from inspector.scene_data import SceneData
+
+    run = make_run(drift=2.0)
+    scene = SceneData.build(baseline=run, proposed=run, route=make_route(), log=None)
+    off = OffRoute.build(scene, make_route(), Params())
+    assert off.source == "proposed" and off.spans == () and off.summary() == ""
+    assert np.nanmax(off.distance_m) < 3.0
+    drifting = make_run(drift=30.0)
+    scene = SceneData.build(baseline=drifting, proposed=drifting, route=make_route(), log=None)
+    off = OffRoute.build(scene, make_route(), Params())
+    assert off.spans and off.spans[0][0] > 20.0 and "OFF-ROUTE" in off.summary()
