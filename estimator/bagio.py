@@ -7,7 +7,10 @@ the topic choice and :data:`CACHE_VERSION`) so the second load of a log is near-
 Repairs, each reported in ``Log.warnings``: samples are sorted by time, exact duplicate stamps
 are dropped (the first is kept), IMU and wheel samples with non-finite values are dropped. GNSS
 fixes without a position are kept (they mark an outage) and are invalid by ``GnssData.valid``;
-a fix whose status says "fix" but whose position is not finite or out of range becomes NO_FIX,
+IMU and wheel samples with physically impossible values (a corrupt message: beyond
+:data:`IMU_LIMITS`, :data:`WHEEL_LIMIT`) are dropped;
+a fix whose status says "fix" but whose position is not finite or out of range becomes NO_FIX
+(with a NaN position),
 and a zero, negative or non-finite position variance becomes unknown (NaN). Irregular IMU
 sample intervals are reported, not changed. See ``docs/robustness.md``.
 """
@@ -31,7 +34,7 @@ from numpy.typing import NDArray
 from .errors import LogError
 from .log import GnssData, ImuData, Log, TopicInfo, TruthData, WheelData
 
-CACHE_VERSION = 3
+CACHE_VERSION = 4
 CACHE_MAX_BYTES = 2_000_000_000
 """Least recently used cache entries are removed beyond this total size."""
 MIN_IMU_SAMPLES = 10
@@ -483,8 +486,21 @@ def _decode(
 # ---------------------------------------------------------------------------------------------
 
 
+IMU_LIMITS = (100.0,) * 3 + (2000.0,) * 3
+"""|gyro| rad/s and |accel| m/s^2 beyond any vehicle IMU's range: such samples are corrupt."""
+WHEEL_LIMIT = 200.0
+"""|speed| m/s beyond any vehicle: a corrupt wheel sample."""
+MAX_ABS_ALTITUDE_M = 100_000.0
+
+
 def _clean(
-    name: str, t: F64, v: F64, warnings: list[str], *, drop_nonfinite: bool
+    name: str,
+    t: F64,
+    v: F64,
+    warnings: list[str],
+    *,
+    drop_nonfinite: bool,
+    limits: tuple[float, ...] | None = None,
 ) -> tuple[F64, F64]:
     order = np.argsort(t, kind="stable")
     if np.any(order != np.arange(len(t))):
@@ -501,6 +517,14 @@ def _clean(
     if bad.any():
         warnings.append(f"{name}: dropped {int(bad.sum())} samples with non-finite values")
         t, v = t[~bad], v[~bad]
+    if limits is not None:
+        wild = np.any(np.abs(v) > np.asarray(limits), axis=1)
+        if wild.any():
+            warnings.append(
+                f"{name}: dropped {int(wild.sum())} samples with physically impossible values "
+                f"(beyond {', '.join(f'{x:g}' for x in dict.fromkeys(limits))})"
+            )
+            t, v = t[~wild], v[~wild]
     return t, v
 
 
@@ -530,7 +554,7 @@ def _assemble(
 ) -> Log:
     warnings: list[str] = []
     t, v, imu_frame = raw["imu"]
-    t, v = _clean(f"IMU {roles.imu}", t, v, warnings, drop_nonfinite=True)
+    t, v = _clean(f"IMU {roles.imu}", t, v, warnings, drop_nonfinite=True, limits=IMU_LIMITS)
     if len(t) < MIN_IMU_SAMPLES:
         raise LogError(
             path, f"too few IMU samples on {roles.imu}: {len(t)} (need at least {MIN_IMU_SAMPLES})"
@@ -561,7 +585,13 @@ def _assemble(
 
     wheel = None
     if "wheel" in raw:
-        wt, wv = _clean(f"wheel {roles.wheel}", *raw["wheel"][:2], warnings, drop_nonfinite=True)
+        wt, wv = _clean(
+            f"wheel {roles.wheel}",
+            *raw["wheel"][:2],
+            warnings,
+            drop_nonfinite=True,
+            limits=(WHEEL_LIMIT,),
+        )
         wheel = WheelData(wt, wv[:, 0].copy()) if len(wt) else None
 
     truth = None
@@ -602,6 +632,7 @@ def _gnss(t: F64, v: F64, name: str, warnings: list[str]) -> GnssData:
             & np.isfinite(alt)
             & (np.abs(lat) <= 90.0)
             & (np.abs(lon) <= 180.0)
+            & (np.abs(alt) <= MAX_ABS_ALTITUDE_M)
         )
     bad_pos = no_pos & (status >= 0)
     if bad_pos.any():
@@ -610,6 +641,7 @@ def _gnss(t: F64, v: F64, name: str, warnings: list[str]) -> GnssData:
             "treated as no fix"
         )
     status[no_pos] = -1
+    lat[no_pos], lon[no_pos], alt[no_pos] = np.nan, np.nan, np.nan  # no inf, no 1e300
     cov = v[:, 4:7].copy()
     cov[(status < 0) | (v[:, 7] == 0)] = np.nan
     with np.errstate(invalid="ignore"):
