@@ -170,10 +170,12 @@ def assert_cli_error(
 
 
 def assert_cli_ok(capsys: pytest.CaptureFixture[str], argv: Sequence[str]) -> str:
-    """Exit code 0, nothing on stderr but warnings; returns stdout."""
+    """Exit code 0, nothing on stderr but routefuse's own lines (progress, warnings: no Python
+    warning, no traceback); returns stdout."""
     code, out, err = run_cli(capsys, argv)
     assert "Traceback" not in err and "internal error" not in err, err
     assert code == 0, (code, err)
+    assert all(line.startswith("routefuse") for line in err.splitlines()), err
     return out
 
 
@@ -188,9 +190,11 @@ def finite_log(log: Log) -> None:
     cov = log.gnss.cov_enu
     known = np.isfinite(cov)
     assert np.all(cov[known] > 0)
+    assert np.all(np.abs(log.imu.gyro) <= 100.0) and np.all(np.abs(log.imu.accel) <= 2000.0)
+    assert np.all(np.abs(log.gnss.alt[ok]) <= 100_000.0)
     if log.wheel is not None:
         assert np.all(np.isfinite(log.wheel.t)) and np.all(np.isfinite(log.wheel.speed))
-        assert np.all(np.diff(log.wheel.t) > 0)
+        assert np.all(np.diff(log.wheel.t) > 0) and np.all(np.abs(log.wheel.speed) <= 200.0)
 
 
 def finite_run(run: Run) -> None:

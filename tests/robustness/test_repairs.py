@@ -76,6 +76,20 @@ def _wheel_nonfinite(tmp: Path, c: Corpus) -> Path:
     return write_log(tmp / "wheel_nan.mcap", wheel=WheelData(w.t, speed))
 
 
+def _imu_impossible(tmp: Path, c: Corpus) -> Path:
+    """Finite but impossible values (a corrupt message): 1e300 rad/s, -5e4 m/s^2, 1e6 m/s."""
+    imu = base_sim().imu
+    gyro, accel = imu.gyro.copy(), imu.accel.copy()
+    gyro[IMU_BAD[:3], 2] = 1e300
+    accel[IMU_BAD[3:], 0] = -5e4
+    wheel = base_sim().wheel
+    speed = wheel.speed.copy()
+    speed[WHEEL_BAD] = 1e6
+    return write_log(
+        tmp / "imu_wild.mcap", imu=ImuData(imu.t, gyro, accel), wheel=WheelData(wheel.t, speed)
+    )
+
+
 def _fix_nonfinite(tmp: Path, c: Corpus) -> Path:
     """NavSatFix messages that say STATUS_FIX but carry NaN/inf (written raw)."""
     values = dict(zip(FIX_BAD.tolist(), [np.nan, np.inf, -np.inf], strict=True))
@@ -224,6 +238,11 @@ REPAIRS: dict[str, Repair] = {
         _check_wheel_dropped,
         "wheel /wheel/odom: dropped 3 samples with non-finite",
     ),
+    "IMU and wheel with impossible values": Repair(
+        _imu_impossible,
+        lambda log: (_check_imu_dropped(log), _check_wheel_dropped(log)),
+        "IMU /imu/data: dropped 6 samples with physically impossible values (beyond 100, 2000)",
+    ),
     "fix with NaN/inf position": Repair(
         _fix_nonfinite,
         _check_fix_invalid,
@@ -280,7 +299,13 @@ def test_repaired_log_runs_to_a_finite_end(
 
 
 @pytest.mark.parametrize(
-    "name", ["IMU NaN/inf", "backwards stamps", "10-minute gap in all sensors"]
+    "name",
+    [
+        "IMU NaN/inf",
+        "IMU and wheel with impossible values",
+        "backwards stamps",
+        "10-minute gap in all sensors",
+    ],
 )
 def test_routefuse_run_accepts_a_repaired_log(
     corpus: Corpus, route: Path, capsys, name: str
