@@ -251,8 +251,9 @@ CONFIG_TABLE = table(
             "IMU mounted rotated (no /tf_static in the bag)",
             "`sensors.imu_roll_deg`, `imu_pitch_deg`, `imu_yaw_deg`: the IMU-to-body rotation "
             "`Rz(yaw) Ry(-pitch) Rx(roll)`, body forward-left-up; nose-down is a negative "
-            "pitch, an x axis turned to the left a positive yaw. A `/tf_static` path from the "
-            "IMU frame to the body frame is applied by the loader instead.",
+            "pitch, an x axis turned to the left a positive yaw. Where the bag has a "
+            "`/tf_static` path from the IMU frame to the body frame, the loader applies it "
+            "first and these angles come on top (leave them 0).",
         ],
         ["GNSS antenna not at the body origin", "`sensors.gnss_lever_arm_m` (forward, left, up)"],
         [
