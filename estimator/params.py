@@ -587,9 +587,11 @@ def coerce_value(spec: ParamSpec, value: Any, source: str | None = None) -> Any:
         raise ConfigError(where, f"{spec.name}: NaN is not a valid value")
     if spec.choices and out not in spec.choices:
         raise ConfigError(where, f"{spec.name}: {out!r} is not one of {spec.choices}")
-    if isinstance(out, int | float) and not isinstance(out, bool):
-        if spec.lo is not None and out < spec.lo or spec.hi is not None and out > spec.hi:
-            raise ConfigError(where, f"{spec.name}={out} is outside [{spec.lo}, {spec.hi}]")
+    number = isinstance(out, int | float) and not isinstance(out, bool)
+    too_low = number and spec.lo is not None and out < spec.lo
+    too_high = number and spec.hi is not None and out > spec.hi
+    if too_low or too_high:
+        raise ConfigError(where, f"{spec.name}={out} is outside [{spec.lo}, {spec.hi}]")
     return out
 
 
