@@ -150,6 +150,21 @@ def test_gnss_returning_with_a_large_jump_is_taken(method: str) -> None:
             assert abs(cross[0] - cross[1]) < 3.0
 
 
+@pytest.mark.xfail(
+    strict=True,
+    reason="matching: under an unmodelled 0.15 deg/s gyro drift, matches on the gentle tunnel "
+    "bend are accepted 12-16 m off along the road while the DR was 1-3 m off",
+)
+def test_matches_under_an_unmodelled_drift_are_no_worse_than_dead_reckoning() -> None:
+    drive, route = _drift_drive(0.15)
+    result = _run(drive.log, route, drive.frame, "proposed")
+    for m in result.matches:
+        if m.accepted:
+            truth = drive.truth_at(m.t)[0]
+            dr = float(np.hypot(*(m.p_dr - truth)))
+            assert float(np.hypot(*(m.pseudo_position - truth))) < max(5.0, 1.5 * dr)
+
+
 def test_heading_converges_after_gnss_returns() -> None:
     drive, route = _drift_drive(0.15)
     result = _run(drive.log, route, drive.frame, "baseline")
