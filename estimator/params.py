@@ -270,6 +270,11 @@ class ExtensionParams:
     robust_gnss: bool = param(
         True, "test fixes against dead-reckoned motion; drop disagreeing fixes before outages"
     )
+    portal_rerun: bool = param(
+        True,
+        "when GNSS drops out, re-process the last noise.gnss_rerun_lag_s without the fixes "
+        "that disagree with dead reckoning (fixed-lag re-run from a saved state)",
+    )
     wheel_scale_state: bool = param(True, "estimate the wheel-speed scale factor as a state")
 
 
@@ -344,6 +349,15 @@ class NoiseParams:
         lo=0.5,
         hi=600,
         step=0.5,
+    )
+    gnss_rerun_lag_s: float = param(
+        10.0,
+        "how far back the fixed-lag re-run at the start of an outage goes "
+        "(extensions.portal_rerun)",
+        unit="s",
+        lo=0,
+        hi=120,
+        step=1,
     )
     gnss_wander_fraction: float = param(
         0.8,

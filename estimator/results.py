@@ -131,6 +131,9 @@ class Run:
     t0: float
     """log start, s (so times can be shown relative to it)"""
     warnings: tuple[str, ...] = ()
+    dropped_fix_times: tuple[float, ...] = ()
+    """fixes the fixed-lag re-run at the start of an outage left out (they disagreed with
+    dead reckoning; ``extensions.portal_rerun``)"""
     resume: object = field(default=None, repr=False, compare=False)
     """opaque checkpoints that let ``runner.run(..., reuse=this_run)`` restart at the first
     match attempt a parameter change affects; None when the run kept none"""

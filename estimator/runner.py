@@ -182,6 +182,7 @@ def run(
         matches=tuple(driver.records),
         degraded_intervals=inputs.degraded,
         t0=log.t_start,
+        dropped_fix_times=tuple(driver.dropped_fixes),
         warnings=tuple(log.warnings)
         + inputs.warnings
         + (route.warnings if route is not None else ()),
@@ -211,7 +212,14 @@ def _log_key(log: Log) -> tuple:
 def _filter_key(p: Params) -> tuple:
     """Everything the filter itself (not the matcher) depends on."""
     ext = p.extensions
-    return (p.noise, p.sensors, ext.wheel_scale_state, ext.robust_gnss, p.output_rate_hz)
+    return (
+        p.noise,
+        p.sensors,
+        ext.wheel_scale_state,
+        ext.robust_gnss,
+        ext.portal_rerun,
+        p.output_rate_hz,
+    )
 
 
 def _frame_of(log: Log) -> LocalFrame:
@@ -494,7 +502,9 @@ def _align(
         if speed is None:
             speed = 0.0
         acc_x = 0.0
-    if still[k0]:
+    if still[k0] and abs(speed) < 1.0:
+        # without wheel speed the IMU-only stillness test also fires on a smooth cruise; a GNSS
+        # chord that moved says otherwise
         speed = 0.0
     # roll, pitch from the accelerometer over the last second
     sel = (imu_t >= t0 - 1.0) & (imu_t <= t0)
@@ -566,6 +576,8 @@ class _Driver:
     checkpoints: list[_Checkpoint] = field(default_factory=list)
     records: list[MatchRecord] = field(default_factory=list)
     track: _Track = field(default_factory=_Track)
+    dropped_fixes: list[float] = field(default_factory=list)
+    """times of the fixes the fixed-lag re-runs left out"""
 
     # --- state handling
     def _set_state(self, x: F64, P: F64, aux: F64, idx: NDArray[np.int64]) -> None:
@@ -601,8 +613,13 @@ class _Driver:
     def _grow(self) -> None:
         self.out = np.vstack([self.out, np.zeros((len(self.out) // 2 + 16, ekf.NO))])
 
-    def _advance(self, t_stop: float) -> None:
+    def _advance(self, t_stop: float, gnss: tuple[F64, F64, F64] | None = None) -> None:
+        """Run the filter to ``t_stop``; ``gnss`` (times, positions, variances) replaces the
+        log's fixes (the fixed-lag re-run)."""
         inp = self.inp
+        gnss_t, gnss_pos, gnss_var = (
+            (inp.gnss_t, inp.gnss_pos, inp.gnss_var) if gnss is None else gnss
+        )
         t_end = float(inp.imu_t[-1])
         t_first = float(inp.imu_t[inp.idx0[ekf.I_IMU] - 1])
         while True:
@@ -625,9 +642,9 @@ class _Driver:
                 inp.still,
                 inp.wheel_t,
                 inp.wheel_v,
-                inp.gnss_t,
-                inp.gnss_pos,
-                inp.gnss_var,
+                gnss_t,
+                gnss_pos,
+                gnss_var,
                 inp.cfg,
                 self.out,
             )
@@ -646,6 +663,38 @@ class _Driver:
             if target >= t_stop or self.idx[ekf.I_IMU] >= len(inp.imu_t):
                 return
 
+    def _advance_to_outage(self, t_a: float) -> None:
+        """Run to the start of a degraded interval (``t_a``, the last fix before the gap).
+
+        With ``extensions.portal_rerun``: at a tunnel portal fixes jump by metres while still
+        claiming metre-level sigmas, and a filter that accepted some of them enters the tunnel
+        from a corrupted position it then carries through the whole outage. So the state
+        ``noise.gnss_rerun_lag_s`` before the gap is saved, the fixes since then are tested
+        against where the filter would have dead-reckoned without them
+        (:func:`_disagreeing_fixes`), and if any disagrees the last seconds are processed again
+        from the saved state without those fixes."""
+        lag = self.p.noise.gnss_rerun_lag_s
+        if not (self.p.extensions.portal_rerun and lag > 0):
+            self._advance(t_a)
+            return
+        self._advance(t_a - lag)
+        saved = (self.x.copy(), self.P.copy(), self.aux.copy(), self.idx.copy())
+        self._advance(t_a)
+        inp = self.inp
+        g0, g1 = int(saved[3][ekf.I_GNSS]), int(self.idx[ekf.I_GNSS])
+        if g1 <= g0:
+            return
+        drop = _disagreeing_fixes(saved, t_a, inp, range(g0, g1))
+        if not drop:
+            return
+        keep = np.ones(len(inp.gnss_t), bool)
+        keep[drop] = False
+        self._set_state(*saved)
+        self._advance(t_a, (inp.gnss_t[keep], inp.gnss_pos[keep], inp.gnss_var[keep]))
+        # every fix up to t_a is behind the filter, in the log's own indexing as well
+        self.idx[ekf.I_GNSS] = g1
+        self.dropped_fixes.extend(float(inp.gnss_t[g]) for g in drop)
+
     def _write_row(self) -> int:
         if self.idx[ekf.I_OUT] >= len(self.out) - 1:
             self._grow()
@@ -659,14 +708,22 @@ class _Driver:
         pred = None if tr.s is None else tr.s + (aux[ekf.A_DIST] - tr.s_dist)
         tr.s = route_arc_length(self.route, x[:2], s_guess=pred, params=self.p)
         tr.s_dist = float(aux[ekf.A_DIST])
+        used = rows[:, ekf.O_GNSS] > 0
+        # the offset is learned around the last epoch a fix was used in, which may lie well
+        # before t_a (fixes rejected or left out at the portal): a search window centred on
+        # the vehicle would clip the older epochs onto its end, with metres of false offset
+        last = np.flatnonzero(used & (rows[:, ekf.O_T] <= t_a))
+        s_last = tr.s
+        if len(last):
+            s_last = tr.s - (float(aux[ekf.A_DIST]) - float(rows[last[-1], ekf.O_DIST]))
         tr.lane = learn_lane_offset(
             rows[:, ekf.O_T],
             rows[:, ekf.O_POS : ekf.O_POS + 2],
-            rows[:, ekf.O_GNSS] > 0,
+            used,
             self.route,
             t_end=t_a,
             params=self.p,
-            s_guess=tr.s,
+            s_guess=s_last,
         )
 
     def _window(self, out: F64, n_out: int, x: F64, aux: F64, length_m: float) -> F64:
@@ -805,7 +862,7 @@ class _Driver:
             if at is not None and i == at.interval:
                 k, dist_a, dist_last = at.k, at.dist_a, at.dist_last
             else:
-                self._advance(a)
+                self._advance_to_outage(a)
                 dist_a = float(self.aux[ekf.A_DIST])
                 dist_last = -math.inf
                 k = 0
@@ -913,6 +970,82 @@ class _Driver:
             gnss_used=o[:, ekf.O_GNSS] > 0,
             degraded=degraded,
         )
+
+
+def _disagreeing_fixes(
+    saved: tuple[F64, F64, F64, NDArray[np.int64]],
+    t_stop: float,
+    inp: _Inputs,
+    fixes: range,
+) -> list[int]:
+    """The fixes (indices into ``inp.gnss_*``) that disagree with the filter dead-reckoned
+    from the ``saved`` state (x, P, aux, idx) to ``t_stop`` without GNSS.
+
+    Each fix's offset from the dead-reckoned antenna position (plus the GNSS wander state) is
+    tested twice, with the chi-square (2 dof) gate ``noise.gnss_chi2_gate``. Against the
+    filter: the saved E/N covariance of position + wander, the growth of the position variance
+    while dead-reckoning, and the log's *typical* white fix variance (not the one the fix
+    reports: portal fixes claim metre-level sigmas for jumps of 5-15 m). Against the other
+    fixes: over a few seconds dead reckoning drifts by centimetres, so good fixes share one
+    offset (the filter's error) up to their white noise and the wander's change, and a jump
+    the wheels did not drive stands out from the largest set of fixes that agree with each
+    other, if that set holds more than half of them. The second test still works when the
+    saved state is loose (a portal shortly after another outage)."""
+    x, P, aux, idx = (a.copy() for a in saved)
+    cfg = inp.cfg
+    t_save = float(aux[ekf.A_TIME])
+    n_rows = int((t_stop - t_save) / cfg[ekf.C_OUT_DT]) + 64
+    rows = np.zeros((n_rows, ekf.NO))
+    idx[ekf.I_OUT] = 0
+    ekf.write_row(x, P, aux, idx, rows)
+    aux[ekf.A_NEXT_OUT] = t_save + cfg[ekf.C_OUT_DT]
+    no_t, no_xyz = np.empty(0), np.empty((0, 3))
+    status = ekf.run_until(
+        t_stop, x, P, aux, idx, inp.imu_t, inp.gyro, inp.accel, inp.still, inp.wheel_t,
+        inp.wheel_v, no_t, no_xyz, no_xyz, cfg, rows,
+    )  # fmt: skip
+    if status != ekf.STATUS_DONE or len(fixes) == 0:
+        return []
+    ekf.write_row(x, P, aux, idx, rows)
+    r = rows[: int(idx[ekf.I_OUT])]
+    t_r = r[:, ekf.O_T]
+    g = np.asarray(fixes)
+    tf = inp.gnss_t[g]
+    pos = np.column_stack([np.interp(tf, t_r, r[:, ekf.O_POS + i]) for i in range(2)])
+    rpy = np.column_stack([np.interp(tf, t_r, np.unwrap(r[:, ekf.O_RPY + i])) for i in range(3)])
+    lever = cfg[ekf.C_LEVER : ekf.C_LEVER + 3]
+    C = np.empty((3, 3))
+    lever_en = np.empty((len(g), 2))
+    for k in range(len(g)):
+        ekf.quat_to_dcm(ekf.euler_to_quat(rpy[k, 0], rpy[k, 1], rpy[k, 2]), C)
+        lever_en[k] = (C @ lever)[:2]
+    gw0 = saved[0][ekf.X_GW : ekf.X_GW + 2]
+    gw = gw0[None, :] * np.exp(-(tf - t_save) / cfg[ekf.C_TAU_W])[:, None]
+    d = inp.gnss_pos[g, :2] - (pos + lever_en + gw)
+    sig2 = np.column_stack([np.interp(tf, t_r, r[:, ekf.O_SIG_POS + i] ** 2) for i in range(2)])
+    growth = np.maximum(sig2 - r[0, ekf.O_SIG_POS : ekf.O_SIG_POS + 2] ** 2, 0.0)
+    white = cfg[ekf.C_WHITE_VAR]
+    gate = cfg[ekf.C_GNSS_GATE]
+    pe, pw = slice(ekf.E_POS, ekf.E_POS + 2), slice(ekf.E_GW, ekf.E_GW + 2)
+    P0 = saved[1]
+    S0 = P0[pe, pe] + P0[pw, pw] + P0[pe, pw] + P0[pw, pe]
+    bad = np.zeros(len(g), bool)
+    for k in range(len(g)):
+        S = S0 + np.diag(growth[k] + white)
+        bad[k] = float(d[k] @ np.linalg.solve(S, d[k])) > gate
+    # the fixes among themselves: two white noises, the wander's change over the lag, and
+    # what a heading or odometer-scale error turns the distance driven into
+    driven = float(r[-1, ekf.O_DIST] - r[0, ekf.O_DIST])
+    drift2 = (P0[ekf.E_ATT + 2, ekf.E_ATT + 2] + P0[ekf.E_SCALE, ekf.E_SCALE]) * driven**2
+    var_pair = 2.0 * white + cfg[ekf.C_QW_H] * (t_stop - t_save) + drift2
+    d2 = np.sum((d[:, None, :] - d[None, :, :]) ** 2, axis=2) / var_pair
+    support = d2 <= gate
+    best = int(np.argmax(support.sum(axis=1)))
+    agree = support[best]
+    if 2 * int(agree.sum()) > len(g):
+        centre = d[agree].mean(axis=0)
+        bad |= np.sum((d - centre) ** 2, axis=1) / var_pair > gate
+    return [int(i) for i in g[bad]]
 
 
 def _max_turn_deg(xy: F64, stretch_m: float, spacing_m: float) -> float:
