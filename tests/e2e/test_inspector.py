@@ -191,6 +191,74 @@ def test_play_and_pause(page):
     assert _frame(pg) == f1
 
 
+def _showcase_attempt(session) -> int:
+    """An accepted attempt inside the tunnel, on a standard-length window, whose DR window is
+    visibly off the route before the fit (the largest innovation of those)."""
+    best, best_nu = None, -1.0
+    for i, m in enumerate(session.proposed.matches):
+        if not m.accepted or not session.proposed.epochs.degraded[m.epoch]:
+            continue
+        if m.extra.get("window_length_m", 0.0) > 300.0 or m.n_pairs < 20:
+            continue
+        nu = float(np.hypot(*m.innovation))
+        if nu > best_nu:
+            best, best_nu = i, nu
+    assert best is not None, "no accepted attempt in the tunnel"
+    return best
+
+
+def test_screenshot_for_the_readme(page, inspector):
+    """The natural long_tunnel session (default parameters), stepped into the tunnel to an
+    accepted attempt: the DR window, the aligned window, the route segment and the pairs on
+    the map, the Match tab open."""
+    from estimator.params import Params
+
+    pg, view = page
+    _, controller, _ = inspector
+    assert controller.session.params == Params()
+    i = _showcase_attempt(controller.session)
+    tl = controller.session.timeline
+    pg.get_by_role("tab", name="Match").click()
+    pg.get_by_role("checkbox").first.check()  # follow vehicle
+    view.seek(float(tl.match_t[i]) - 0.5 * float(tl.match_t[i] - tl.match_t[i - 1]))
+    _click(pg, "attempt ›")
+    _wait(lambda: f"Attempt #{i} of" in pg.inner_text("body"), 20, "the attempt")
+    text = pg.inner_text("body")
+    assert "ACCEPTED" in text and "GNSS missing" in text
+    overlay = view.layers.layers["match"]._handles
+    assert "accepted" in overlay["label"].text
+    # Close over the window (not the vehicle at its end), low enough that the few metres
+    # between the DR window and the aligned one show.
+    pg.get_by_role("checkbox").first.uncheck()
+    _wait(lambda: not view.follow, 10, "follow off")
+    m = controller.session.proposed.matches[i]
+    height = 140.0
+    with view._lock:
+        mid = np.mean(np.vstack([m.window_dr, m.route_points]), axis=0)
+        c = mid + view._panel_shift(height)[:2]
+        cam = view.client.camera
+        cam.position = (float(c[0]), float(c[1]) - 0.001 * height, height)
+        cam.look_at = (float(c[0]), float(c[1]), 0.0)
+    close = pg.locator(".mantine-Notification-closeButton")
+    for k in range(close.count()):
+        close.nth(k).dispatch_event("click")  # the "software WebGL" notice covers the map
+    time.sleep(2.0)
+    out = REPO / "docs" / "inspector.png"
+    out.parent.mkdir(exist_ok=True)
+    tmp = out.with_suffix(".tmp.png")
+    pg.screenshot(path=str(tmp))
+    import matplotlib.image as mpimg
+
+    img = mpimg.imread(str(tmp))[..., :3]
+    scene = img[:, : int(img.shape[1] * 0.6)]  # left of the control panel
+    background = np.median(scene.reshape(-1, 3), axis=0)
+    drawn = np.any(np.abs(scene - background) > 0.1, axis=2)
+    assert drawn.mean() > 0.002, "the 3D view is blank"
+    colours = {tuple(c) for c in np.round(scene[drawn] * 4).astype(int)}
+    assert len(colours) >= 4, "the 3D view shows fewer layers than expected"
+    shutil.move(tmp, out)
+
+
 def test_parameter_slider_reruns_and_changes_metrics(page, inspector):
     pg, _ = page
     _, controller, _ = inspector
@@ -227,35 +295,13 @@ def test_next_rejected_attempt_shows_the_failed_gate(page, inspector):
     pg.get_by_role("tab", name="Match").click()
     start = _frame(pg)
     _click(pg, "rejected ›")
+    _wait(lambda: _frame(pg) > start, 10, "the jump")
     _wait(lambda: "REJECTED" in pg.inner_text("body"), 10, "a rejected attempt")
     text = pg.inner_text("body")
     assert re.search(r"min_pairs\s+[\d.]+\s+>= 500\.000\s+✗ FAILED", text), text[:2000]
-    assert _frame(pg) > start
     i = view.session.timeline.match_at(view.playhead.t)
     assert i is not None and not view.session.proposed.matches[i].accepted
     assert view.layers.layers["match"]._handles["label"].text.endswith("rejected: min_pairs")
-
-
-def test_screenshot_for_the_readme(page):
-    pg, _ = page
-    close = pg.locator(".mantine-Notification-closeButton")
-    for i in range(close.count()):
-        close.nth(i).dispatch_event("click")  # the "software WebGL" notice covers the map
-    time.sleep(1.5)
-    out = REPO / "docs" / "inspector.png"
-    out.parent.mkdir(exist_ok=True)
-    tmp = out.with_suffix(".tmp.png")
-    pg.screenshot(path=str(tmp))
-    import matplotlib.image as mpimg
-
-    img = mpimg.imread(str(tmp))[..., :3]
-    scene = img[:, : int(img.shape[1] * 0.6)]  # left of the control panel
-    background = np.median(scene.reshape(-1, 3), axis=0)
-    drawn = np.any(np.abs(scene - background) > 0.1, axis=2)
-    assert drawn.mean() > 0.002, "the 3D view is blank"
-    colours = {tuple(c) for c in np.round(scene[drawn] * 4).astype(int)}
-    assert len(colours) >= 4, "the 3D view shows fewer layers than expected"
-    shutil.move(tmp, out)
 
 
 def test_two_tabs_keep_their_own_time(browser, inspector, page):
@@ -329,3 +375,122 @@ def test_upload_a_route_and_refuse_an_oversized_file(page, inspector, tmp_path):
     chooser.value.set_files(str(big))
     _wait(lambda: _notified(pg, "exceeds the limit"), 30, "the refusal")
     assert not any(p.name.endswith("big.mcap") for p in controller.uploads.path.iterdir())
+
+
+def _status(page) -> str:
+    """The status line's attempt count ('' while a run's progress replaces it)."""
+    m = re.search(r"\d+ match attempts \(\d+ rejected\)", page.inner_text("body"))
+    return m.group(0) if m else ""
+
+
+def test_four_pages_keep_their_time_and_share_a_parameter_change(browser, inspector, page):
+    """Four pages on one server, each at its own frame; 'reset to defaults' on one re-runs once
+    and every page shows the new run without losing its time."""
+    pg1, view1 = page
+    _, controller, _ = inspector
+    assert controller.params.gates.min_pairs == 500  # left by the tests above
+    server, _, app = inspector
+    known = {v.client.client_id for v in app.views()}
+    new_pages = []
+    for _ in range(3):  # opened together: each page's first load overlaps the others'
+        pg = browser.new_page(viewport={"width": 800, "height": 560})
+        pg.set_default_timeout(90_000)
+        pg.goto(f"http://127.0.0.1:{server.get_port()}", wait_until="commit")
+        new_pages.append(pg)
+    for pg in new_pages:
+        _wait(lambda pg=pg: "match attempts" in pg.inner_text("body"), 90, "a page to load")
+    new_views = _wait(
+        lambda: (
+            (v := [v for v in app.views() if v.client.client_id not in known]) and len(v) == 3 and v
+        ),
+        10,
+        "the pages' views",
+    )
+    others = list(zip(new_pages, [None] * 3, strict=True))
+    pages = [(pg1, view1), *others]
+    sessions: list = []
+    unsubscribe = controller.subscribe(on_session=sessions.append)
+    try:
+        _click(pg1, "next ›")
+        for k, (pg, _) in enumerate(others, start=1):
+            for _ in range(k):  # dispatched: these pages need not finish compiling shaders
+                pg.get_by_role("button", name="10 »", exact=True).dispatch_event("click")
+        for k, (pg, _) in enumerate(others, start=1):
+            _wait(lambda pg=pg, k=k: _frame(pg) == 1 + 10 * k, 20, f"page {k + 1} to step")
+        frames = [_frame(pg) for pg, _ in pages]
+        assert len(set(frames)) == 4, frames
+        views = [view1, *new_views]
+        assert {v.session.timeline.frame_at(v.playhead.t) + 1 for v in views} == set(frames)
+        before = [_status(pg) for pg, _ in pages]
+        assert all(before), before
+
+        pg2 = others[0][0]
+        pg2.get_by_role("tab", name="Parameters").click()
+        pg2.get_by_role("button", name="reset to defaults", exact=True).dispatch_event("click")
+        _wait(lambda: controller.params.gates.min_pairs != 500, 10, "the reset to arrive")
+        assert controller.wait_idle(120)
+        new = controller.session
+        assert new.params.gates.min_pairs != 500
+        for (pg, _), old in zip(pages, before, strict=True):
+            _wait(
+                lambda pg=pg, old=old: _status(pg) not in ("", old),
+                30,
+                "every page to show the re-run",
+            )
+        expected = f"({int((~new.timeline.match_accepted).sum())} rejected)"
+        time.sleep(1.0)
+        assert len(sessions) == 1, "one parameter change, one re-run"
+        for (pg, _), f in zip(pages, frames, strict=True):
+            assert _status(pg).endswith(expected)
+            assert _frame(pg) == f  # each page kept its own time
+        assert all(v.session is new for v in views)
+    finally:
+        unsubscribe()
+        for pg, _ in others:
+            pg.close()
+
+
+def _detour_route(route_path: Path, out: Path) -> Path:
+    """The sample route up to 600 m (before its first S-bend turns back), then straight on for
+    2 km: the drive leaves it at the bend."""
+    import json
+
+    from estimator.geo import LocalFrame
+
+    doc = json.loads(route_path.read_text())
+    ll = np.array(doc["features"][0]["geometry"]["coordinates"], np.float64)[:, :2]
+    frame = LocalFrame(ll[0, 1], ll[0, 0], 0.0)
+    xy = frame.to_enu(ll[:, 1], ll[:, 0], np.zeros(len(ll)))[:, :2]
+    s = np.r_[0.0, np.cumsum(np.hypot(*np.diff(xy, axis=0).T))]
+    keep = xy[s <= 600.0]
+    d = keep[-1] - keep[-2]
+    ext = keep[-1] + np.outer(np.arange(100.0, 2001.0, 100.0), d / np.hypot(*d))
+    pts = np.vstack([keep, ext])
+    geo = frame.to_geodetic(np.column_stack([pts, np.zeros(len(pts))]))
+    doc["features"][0]["geometry"]["coordinates"] = [[lon, lat] for lat, lon in geo[:, :2]]
+    out.write_text(json.dumps(doc))
+    return out
+
+
+def test_off_route_is_shown_when_the_drive_leaves_the_route(page, inspector, tmp_path):
+    """The sample log on a route that goes straight on where the drive turns: the status line
+    says off-route, and a frame past the bend says so in the frame label and the match panel."""
+    pg, view = page
+    _, controller, _ = inspector
+    old = controller.session
+    route = _detour_route(old.route_path, tmp_path / "detour.route.geojson")
+    controller.open(old.log_path, route)
+    assert controller.wait_idle(180)
+    s = controller.session
+    assert s is not old and s.route_path == route.resolve()
+    off = s.off_route
+    assert off.spans, "the detour is not off-route"
+    _wait(lambda: "OFF-ROUTE" in pg.inner_text("body"), 30, "the status line")
+    a, b = off.spans[0]
+    pg.get_by_role("tab", name="Match").click()
+    view.seek(a + 0.5 * (b - a))
+    _click(pg, "next ›")
+    _wait(lambda: "from the route" in pg.inner_text("body"), 20, "the frame label")
+    text = pg.inner_text("body")
+    assert re.search(r"GNSS \w+ · OFF-ROUTE \(truth [\d.]+ m from the route\)", text), text[:800]
+    assert "the vehicle (truth) is" in text  # the match panel
