@@ -232,9 +232,10 @@ def test_screenshot_for_the_readme(page, inspector):
     pg.get_by_role("checkbox").first.uncheck()
     _wait(lambda: not view.follow, 10, "follow off")
     m = controller.session.proposed.matches[i]
-    height = 140.0
+    height = 110.0
     with view._lock:
         mid = np.mean(np.vstack([m.window_dr, m.route_points]), axis=0)
+        mid = 0.4 * mid + 0.6 * np.asarray(m.p_dr)  # the vehicle (the window's end) in view
         c = mid + view._panel_shift(height)[:2]
         cam = view.client.camera
         cam.position = (float(c[0]), float(c[1]) - 0.001 * height, height)
