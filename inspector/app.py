@@ -20,7 +20,7 @@ from viser import _messages
 
 from estimator.errors import RoutefuseError
 from estimator.params import ParamSpec, get_param, param_specs, params_to_toml
-from estimator.results import MatchRecord
+from estimator.results import GateDecision, MatchRecord
 
 from .controller import Controller, Playhead, Session
 from .layers import LAYER_TYPES, SceneLayers
@@ -54,6 +54,14 @@ def _fmt(v: Any, digits: int = 3) -> str:
     return f"{f:.{digits}f}" if abs(f) < 1e5 else f"{f:.3g}"
 
 
+def _gate_value(g: GateDecision) -> str:
+    """The matcher caps an alternative's margin at 1e9 when no rival fits the shape gates:
+    that means 'no rival', not a number to read."""
+    if g.name.startswith("alternative_") and g.value >= 1e9:
+        return "no rival"
+    return _fmt(g.value)
+
+
 def _vec(v: Any, digits: int = 2) -> str:
     a = np.asarray(v, np.float64).reshape(-1)
     if a.size == 0 or not np.all(np.isfinite(a)):
@@ -80,7 +88,7 @@ def match_markdown(
     for g in m.gates:
         verdict = "✓ passed" if g.passed else "✗ **FAILED**"
         lines.append(
-            f"| {g.name} | {_fmt(g.value)} | {g.comparison} {_fmt(g.threshold)} | {verdict} |"
+            f"| {g.name} | {_gate_value(g)} | {g.comparison} {_fmt(g.threshold)} | {verdict} |"
         )
         if g.note:
             notes.append(f"*{g.name}*: {g.note}")
