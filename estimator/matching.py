@@ -25,6 +25,13 @@ from numba import njit
 from numpy.typing import ArrayLike, NDArray
 
 from .errors import RouteError, RoutefuseError
+from .matching_kernels import (
+    offset_polyline,
+    pair_points,
+    polyline_arrays,
+    rigid_fit,
+    unit_interval,
+)
 from .params import Params
 from .results import Comparison, GateDecision, MatchRecord
 from .route import Route
@@ -122,35 +129,41 @@ def shifted_route(
     parallel road does not loop either.
     """
     end = route.length if s1 is None else s1
-    pts = route.segment(s0, end)
-    seglen = np.hypot(*np.diff(pts, axis=0).T)
-    if not np.any(seglen > 1e-9):
+    out = offset_polyline(route.segment(s0, end), float(lateral_m))
+    if len(out) == 0:
         raise RouteError(route.source or None, "route piece to shift has no length")
-    pts = np.vstack([pts[:1], pts[1:][seglen > 1e-9]])
-    u = np.diff(pts, axis=0)
-    u /= np.hypot(u[:, 0], u[:, 1])[:, None]
-    nrm = np.column_stack([-u[:, 1], u[:, 0]])
-    miter = np.empty_like(pts)
-    miter[0], miter[-1] = nrm[0], nrm[-1]
-    if len(nrm) > 1:
-        cos = np.einsum("ij,ij->i", nrm[:-1], nrm[1:])
-        miter[1:-1] = (nrm[:-1] + nrm[1:]) / np.maximum(1.0 + cos, 0.5)[:, None]
-    out = pts + lateral_m * miter
-    keep = np.arange(len(pts))
-    while len(keep) > 2:
-        chord = np.diff(pts[keep], axis=0)
-        moved = np.diff(out[keep], axis=0)
-        folded = np.flatnonzero(np.einsum("ij,ij->i", chord, moved) <= 0.0)
-        if not len(folded):
-            break
-        drop = np.zeros(len(keep), bool)
-        drop[folded] = drop[folded + 1] = True
-        drop[[0, -1]] = False
-        if not drop.any():
-            break
-        keep = keep[~drop]
-    out = out[keep]
-    return Route(out, name=route.name, source=route.source)
+    return _local_route(out, route)
+
+
+def _local_route(xy: F64, like: Route) -> Route:
+    """``Route(xy, name=like.name, source=like.source)`` for the matcher's short local pieces,
+    with the arrays computed by a compiled kernel (the same values, bit for bit) instead of
+    the constructor's dozen small numpy calls."""
+    kept, seglen, unit, s = polyline_arrays(np.ascontiguousarray(xy, np.float64))
+    if len(kept) < 2 or not np.all(np.isfinite(kept)):
+        return Route(xy, name=like.name, source=like.source)  # raises its own error
+    removed = len(xy) - len(kept)
+    route = object.__new__(Route)
+    kept.setflags(write=False)
+    for name, value in (
+        ("xy", kept),
+        ("name", like.name),
+        ("source", like.source),
+        ("s", s),
+        ("_seglen", seglen),
+        ("_unit", unit),
+        (
+            "warnings",
+            (
+                f"route {like.source or like.name}: removed {removed} repeated vertices "
+                "(zero-length segments)",
+            )
+            if removed
+            else (),
+        ),
+    ):
+        object.__setattr__(route, name, value)
+    return route
 
 
 _BLOCK = 32
@@ -357,7 +370,17 @@ def _scan_kernel(
         sw = 0.0
         sax = say = sbx = sby = 0.0
         saa = sbb = c00 = c01 = c10 = c11 = 0.0
-        j = 0
+        # the segment the walk below reaches for the first point: the number of rs[1:nseg]
+        # at or before it (binary search; walking from 0 costs the route's length per offset)
+        lo, hi = 1, nseg
+        s_first = s_anchor + deltas[k]
+        while lo < hi:
+            mid = (lo + hi) // 2
+            if rs[mid] <= s_first:
+                lo = mid + 1
+            else:
+                hi = mid
+        j = lo - 1
         for i in range(n):
             s = s_anchor + deltas[k] + spacing * i
             if s < -1e-6 or s > length + 1e-6:
@@ -435,32 +458,36 @@ def _scan(win: F64, route: Route, s_anchor: float, deltas: F64, spacing: float) 
 
 
 def _pairs(
-    win: F64, route: Route, s_first: float, spacing: float
+    win: F64, route: Route, s_first: float, spacing: float, *, exact: bool = True
 ) -> tuple[F64, NDArray[np.bool_], F64, F64, F64, float]:
-    """The pairs at one offset, registered with the SVD Kabsch fit."""
-    s = s_first + spacing * np.arange(len(win))
-    valid = (s >= -1e-6) & (s <= route.length + 1e-6)
-    q = route.point_at(s)
-    rot, trans, ms = _kabsch(win[None], q[None], valid[None].astype(np.float64))
-    return s, valid, q, rot[0], trans[0], float(np.sqrt(ms[0]))
+    """The pairs at one offset (compiled), registered with the rigid fit.
+
+    ``exact``: the numpy SVD fit, whose rounding the filter's results were made with (a match
+    the filter is updated with feeds later windows, and the along-track search amplifies a
+    1e-16 change into 1e-8 m over an outage); otherwise the closed-form compiled fit, equal to
+    rounding, for the rivals, which are only scored."""
+    n = len(win)
+    w = np.ascontiguousarray(win, np.float64)
+    s = np.empty(n)
+    valid = np.empty(n, np.bool_)
+    q = np.empty((n, 2))
+    pair_points(w, route.xy, route.s, route._unit, float(s_first), float(spacing), s, valid, q)
+    if exact:
+        rot3, trans3, ms = _kabsch(w[None], q[None], valid[None].astype(np.float64))
+        return s, valid, q, rot3[0], trans3[0], float(np.sqrt(ms[0]))
+    rot = np.empty((2, 2))
+    trans = np.empty(2)
+    residual = rigid_fit(w, q, valid, rot, trans)
+    return s, valid, q, rot, trans, float(residual)
 
 
 def _unit_interval(x: F64, chi: F64, k: int) -> tuple[float, float] | None:
     """Where ``chi`` first rises above 1 on each side of its minimum at ``k`` (linearly
     interpolated); None when it never does inside the grid."""
-    ends = []
-    for direction in (-1, 1):
-        i = k
-        while True:
-            j = i + direction
-            if j < 0 or j >= len(x) or not np.isfinite(chi[j]):
-                return None
-            if chi[j] > 1.0:
-                f = (1.0 - chi[i]) / (chi[j] - chi[i])
-                ends.append(float(x[i] + f * (x[j] - x[i])))
-                break
-            i = j
-    return ends[0], ends[1]
+    found, lo, hi = unit_interval(
+        np.ascontiguousarray(x, np.float64), np.ascontiguousarray(chi, np.float64), int(k)
+    )
+    return (float(lo), float(hi)) if found else None
 
 
 def _fit(
@@ -470,8 +497,11 @@ def _fit(
     s_anchor: float,
     lane_offset: float,
     params: Params,
+    *,
+    exact: bool = True,
 ) -> _Fit | None:
-    """Register the window to one route candidate; None when fewer than 2 pairs exist."""
+    """Register the window to one route candidate; None when fewer than 2 pairs exist.
+    ``exact``: see :func:`_pairs` (False for rivals)."""
     ext = params.extensions
     h = params.window.spacing_m
     po = params.pseudo
@@ -509,7 +539,7 @@ def _fit(
         offset = 0.0
     sigma = float(max(sigma, po.along_sigma_min_m)) if observed else po.along_sigma_max_m
 
-    s, valid, q, rot, trans, residual = _pairs(win, route, s_anchor + offset, h)
+    s, valid, q, rot, trans, residual = _pairs(win, route, s_anchor + offset, h, exact=exact)
     idx = np.flatnonzero(valid)
     n_pairs = len(idx)
     if n_pairs < 2:
@@ -599,10 +629,15 @@ def _shape_gates(fit: _Fit, params: Params) -> list[GateDecision]:
 
 
 def _mahalanobis2(nu: F64, cov: F64) -> float:
-    try:
-        return float(nu @ np.linalg.solve(cov, nu))
-    except np.linalg.LinAlgError:
+    """nu^T cov^-1 nu of a 2-vector (inf when cov is singular); the 2x2 inverse written out,
+    which is np.linalg.solve's result to rounding at a fraction of its call overhead."""
+    a, b = float(cov[0, 0]), float(cov[0, 1])
+    c, d = float(cov[1, 0]), float(cov[1, 1])
+    det = a * d - b * c
+    if det == 0.0:
         return float("inf")
+    n0, n1 = float(nu[0]), float(nu[1])
+    return (n0 * (d * n0 - b * n1) + n1 * (a * n1 - c * n0)) / det
 
 
 def _rival_cost(fit: _Fit, p_dr: F64, pos_cov2: F64, params: Params) -> float:
@@ -625,10 +660,10 @@ def _piece(
         piece = (
             shifted_route(route, lateral_m, s0=lo, s1=hi)
             if lateral_m
-            else Route(route.segment(lo, hi), name=route.name, source=route.source)
+            else _local_route(route.segment(lo, hi), route)
         )
         if reverse:
-            piece = Route(piece.xy[::-1], name=route.name, source=route.source)
+            piece = _local_route(piece.xy[::-1], route)
     except RouteError:
         return None
     return piece
@@ -660,7 +695,7 @@ def _rivals(
         if piece is None:
             out[name] = None
             continue
-        out[name] = _fit(win, p_dr, piece, _anchor(piece, win[0]), z_lane, params)
+        out[name] = _fit(win, p_dr, piece, _anchor(piece, win[0]), z_lane, params, exact=False)
     return out
 
 

@@ -1,0 +1,251 @@
+"""Compiled inner loops of the route matcher (:mod:`estimator.matching`).
+
+A match attempt fits the window to four short route pieces (the candidate and the left, right
+and reversed rivals); in numpy each fit and each piece cost some fifty small-array calls, which
+made the matcher the run's bottleneck (profiles in ``docs/performance.md``).
+
+Everything the filter is updated with is computed bit for bit as the numpy code these kernels
+replaced (the same operations in the same order: arc lengths, offsets, point interpolation), so
+a run's results do not change. :func:`rigid_fit` is the exception: a closed-form 2-D Kabsch fit,
+equal to the SVD fit to rounding, used only for the rivals, which are scored but never fed to
+the filter. ``tests/estimator/test_matching_kernels.py`` compares each kernel, and a whole run,
+with the numpy originals.
+"""
+
+from __future__ import annotations
+
+import math
+
+import numpy as np
+from numba import njit
+from numpy.typing import NDArray
+
+F64 = NDArray[np.float64]
+
+MIN_VERTEX_GAP_M = 1e-6
+"""Route drops a vertex closer than this to its predecessor (see Route.__post_init__)."""
+MIN_SHIFT_SEGMENT_M = 1e-9
+"""shifted_route ignores segments shorter than this when building miters."""
+
+
+@njit(cache=True)
+def polyline_arrays(xy: F64) -> tuple[F64, F64, F64, F64]:
+    """What :class:`~estimator.route.Route` computes from its vertices: the kept vertices (a
+    vertex within 1e-6 m of its predecessor in the input is dropped), segment lengths, unit
+    directions and cumulative arc length."""
+    n = xy.shape[0]
+    keep = np.ones(n, np.bool_)
+    m = min(n, 1)
+    for i in range(1, n):
+        keep[i] = np.hypot(xy[i, 0] - xy[i - 1, 0], xy[i, 1] - xy[i - 1, 1]) > MIN_VERTEX_GAP_M
+        if keep[i]:
+            m += 1
+    out = np.empty((m, 2))
+    j = 0
+    for i in range(n):
+        if keep[i]:
+            out[j, 0] = xy[i, 0]
+            out[j, 1] = xy[i, 1]
+            j += 1
+    nseg = max(m - 1, 0)
+    seglen = np.empty(nseg)
+    unit = np.empty((nseg, 2))
+    s = np.empty(nseg + 1)
+    s[0] = 0.0
+    for i in range(nseg):
+        dx = out[i + 1, 0] - out[i, 0]
+        dy = out[i + 1, 1] - out[i, 1]
+        seglen[i] = np.hypot(dx, dy)
+        unit[i, 0] = dx / seglen[i]
+        unit[i, 1] = dy / seglen[i]
+        s[i + 1] = s[i] + seglen[i]
+    return out, seglen, unit, s
+
+
+@njit(cache=True)
+def offset_polyline(pts: F64, lateral_m: float) -> F64:
+    """The polyline moved sideways by ``lateral_m`` (left positive) along its vertex miters,
+    with the vertices of folded (looped) stretches dropped; (0, 2) when it has no length.
+    The body of :func:`estimator.matching.shifted_route`."""
+    n = pts.shape[0]
+    # vertices after dropping segments shorter than MIN_SHIFT_SEGMENT_M (the first always kept)
+    idx = np.empty(n, np.int64)
+    m = 0
+    for i in range(n):
+        if i == 0:
+            idx[m] = 0
+            m += 1
+            continue
+        d = np.hypot(pts[i, 0] - pts[i - 1, 0], pts[i, 1] - pts[i - 1, 1])
+        if d > MIN_SHIFT_SEGMENT_M:
+            idx[m] = i
+            m += 1
+    if m < 2:
+        return np.empty((0, 2))
+    p = np.empty((m, 2))
+    for i in range(m):
+        p[i, 0] = pts[idx[i], 0]
+        p[i, 1] = pts[idx[i], 1]
+    nrm = np.empty((m - 1, 2))
+    for i in range(m - 1):
+        ux = p[i + 1, 0] - p[i, 0]
+        uy = p[i + 1, 1] - p[i, 1]
+        h = np.hypot(ux, uy)
+        ux /= h
+        uy /= h
+        nrm[i, 0] = -uy
+        nrm[i, 1] = ux
+    out = np.empty((m, 2))
+    for c in range(2):
+        out[0, c] = p[0, c] + lateral_m * nrm[0, c]
+        out[m - 1, c] = p[m - 1, c] + lateral_m * nrm[m - 2, c]
+    for i in range(1, m - 1):
+        cos = nrm[i - 1, 0] * nrm[i, 0] + nrm[i - 1, 1] * nrm[i, 1]
+        den = max(1.0 + cos, 0.5)
+        for c in range(2):
+            out[i, c] = p[i, c] + lateral_m * ((nrm[i - 1, c] + nrm[i, c]) / den)
+    keep = np.arange(m)
+    while keep.shape[0] > 2:
+        k = keep.shape[0]
+        drop = np.zeros(k, np.bool_)
+        any_folded = False
+        for i in range(k - 1):
+            a, b = keep[i], keep[i + 1]
+            chord_x = p[b, 0] - p[a, 0]
+            chord_y = p[b, 1] - p[a, 1]
+            moved_x = out[b, 0] - out[a, 0]
+            moved_y = out[b, 1] - out[a, 1]
+            if chord_x * moved_x + chord_y * moved_y <= 0.0:
+                any_folded = True
+                drop[i] = True
+                drop[i + 1] = True
+        if not any_folded:
+            break
+        drop[0] = False
+        drop[k - 1] = False
+        if not drop.any():
+            break
+        keep = keep[~drop]
+    res = np.empty((keep.shape[0], 2))
+    for i in range(keep.shape[0]):
+        res[i, 0] = out[keep[i], 0]
+        res[i, 1] = out[keep[i], 1]
+    return res
+
+
+@njit(cache=True)
+def pair_points(
+    win: F64,
+    rxy: F64,
+    rs: F64,
+    runit: F64,
+    s_first: float,
+    spacing: float,
+    s_out: F64,
+    valid_out: NDArray[np.bool_],
+    q_out: F64,
+) -> None:
+    """Pair window point i with the route point at ``s_first + i * spacing`` (as
+    ``Route.point_at``, bit for bit: end segments extended); pairs off the route are
+    invalid."""
+    n = win.shape[0]
+    nseg = rxy.shape[0] - 1
+    length = rs[nseg]
+    # the segment of the first point: searchsorted(rs, s, 'right') - 1, clipped
+    lo, hi = 0, nseg + 1
+    while lo < hi:
+        mid = (lo + hi) // 2
+        if rs[mid] <= s_first:
+            lo = mid + 1
+        else:
+            hi = mid
+    j = min(max(lo - 1, 0), nseg - 1)
+    for i in range(n):
+        s = s_first + spacing * float(i)
+        while j < nseg - 1 and rs[j + 1] <= s:
+            j += 1
+        s_out[i] = s
+        valid_out[i] = s >= -1e-6 and s <= length + 1e-6
+        d = s - rs[j]
+        q_out[i, 0] = rxy[j, 0] + d * runit[j, 0]
+        q_out[i, 1] = rxy[j, 1] + d * runit[j, 1]
+
+
+@njit(cache=True)
+def rigid_fit(win: F64, q: F64, valid: NDArray[np.bool_], rot_out: F64, trans_out: F64) -> float:
+    """The proper rotation and translation minimising sum |R win_i + t - q_i|^2 over the valid
+    pairs, in closed form; fills the outputs and returns the RMS residual. Agrees with the SVD
+    fit (``matching._kabsch``) to rounding, not bit for bit."""
+    n = win.shape[0]
+    wsum = 0.0
+    csx = csy = ctx = cty = 0.0
+    for i in range(n):
+        if valid[i]:
+            wsum += 1.0
+            csx += win[i, 0]
+            csy += win[i, 1]
+            ctx += q[i, 0]
+            cty += q[i, 1]
+    wsum = max(wsum, 1e-300)
+    csx /= wsum
+    csy /= wsum
+    ctx /= wsum
+    cty /= wsum
+    c00 = c01 = c10 = c11 = 0.0
+    for i in range(n):
+        if valid[i]:
+            ax = win[i, 0] - csx
+            ay = win[i, 1] - csy
+            bx = q[i, 0] - ctx
+            by = q[i, 1] - cty
+            c00 += ax * bx
+            c01 += ax * by
+            c10 += ay * bx
+            c11 += ay * by
+    # the rotation maximising tr(R C) = cos (c00 + c11) + sin (c01 - c10)
+    h = np.hypot(c00 + c11, c01 - c10)
+    if h > 0.0:
+        c = (c00 + c11) / h
+        s_ = (c01 - c10) / h
+    else:
+        c, s_ = 1.0, 0.0
+    rot_out[0, 0] = c
+    rot_out[0, 1] = -s_
+    rot_out[1, 0] = s_
+    rot_out[1, 1] = c
+    tx = ctx - (c * csx - s_ * csy)
+    ty = cty - (s_ * csx + c * csy)
+    trans_out[0] = tx
+    trans_out[1] = ty
+    # the residual summed point by point (the numpy version's |a|^2 + |b|^2 - 2 tr(R C) loses
+    # ~1e-12 m^2 to cancellation, which is 1e-9 m on a millimetre residual)
+    sq = 0.0
+    for i in range(n):
+        if valid[i]:
+            # R (w - cs) + ct - q, centred: the terms are window-sized, not map-sized
+            ax = win[i, 0] - csx
+            ay = win[i, 1] - csy
+            ex = c * ax - s_ * ay - (q[i, 0] - ctx)
+            ey = s_ * ax + c * ay - (q[i, 1] - cty)
+            sq += ex * ex + ey * ey
+    return math.sqrt(sq / wsum)
+
+
+@njit(cache=True)
+def unit_interval(x: F64, chi: F64, k: int) -> tuple[bool, float, float]:
+    """Where ``chi`` first rises above 1 on each side of its minimum at ``k`` (linearly
+    interpolated): (found, low end, high end); not found when it never does inside the grid."""
+    ends = np.empty(2)
+    for side in range(2):
+        direction = -1 if side == 0 else 1
+        i = k
+        while True:
+            j = i + direction
+            if j < 0 or j >= x.shape[0] or not np.isfinite(chi[j]):
+                return False, 0.0, 0.0
+            if chi[j] > 1.0:
+                f = (1.0 - chi[i]) / (chi[j] - chi[i])
+                ends[side] = x[i] + f * (x[j] - x[i])
+                break
+            i = j
+    return True, ends[0], ends[1]
