@@ -6,35 +6,19 @@ from __future__ import annotations
 
 import re
 import shutil
-import socket
 import time
 from collections.abc import Iterator
 from pathlib import Path
 
 import numpy as np
 import pytest
+from _browser import free_port
 
 pytestmark = pytest.mark.e2e
 
 REPO = Path(__file__).resolve().parents[2]
 SAMPLE = REPO / "sample_logs" / "long_tunnel.mcap"
-CHROMIUM = Path("/usr/bin/chromium")
-CHROMIUM_ARGS = [
-    "--no-sandbox",
-    "--disable-gpu",
-    "--disable-quic",
-    "--no-first-run",
-    "--disable-background-networking",
-    "--disable-component-update",
-    "--disable-sync",
-]
 VIEWPORT = {"width": 1400, "height": 900}
-
-
-def _free_port() -> int:
-    with socket.socket() as s:
-        s.bind(("127.0.0.1", 0))
-        return s.getsockname()[1]
 
 
 def _sample(tmp_path_factory: pytest.TempPathFactory) -> tuple[Path, Path]:
@@ -61,7 +45,7 @@ def inspector(tmp_path_factory):
     (extra / "broken.mcap").write_bytes(b"this is not an mcap file")
     server, controller, app = start(
         host="127.0.0.1",
-        port=_free_port(),
+        port=free_port(),
         data_dirs=[extra],
         log=log,
         route=route,
@@ -75,18 +59,6 @@ def inspector(tmp_path_factory):
         app.close()
         controller.close()
         server.stop()
-
-
-@pytest.fixture(scope="module")
-def browser():
-    if not CHROMIUM.exists():
-        pytest.skip("Debian chromium is not installed (apt-get install chromium)")
-    from playwright.sync_api import sync_playwright
-
-    with sync_playwright() as p:
-        b = p.chromium.launch(executable_path=str(CHROMIUM), headless=True, args=CHROMIUM_ARGS)
-        yield b
-        b.close()
 
 
 def _wait(predicate, timeout: float = 30.0, what: str = "condition"):

@@ -8,39 +8,23 @@ from __future__ import annotations
 
 import json
 import re
-import socket
 import time
 from pathlib import Path
 
 import numpy as np
 import pytest
+from _browser import free_port
 
 pytestmark = pytest.mark.e2e
 
 REPO = Path(__file__).resolve().parents[2]
 DATA = REPO.parent / "shared" / "data"
 CONFIGS = REPO / "sample_logs" / "configs"
-CHROMIUM = Path("/usr/bin/chromium")
-CHROMIUM_ARGS = [
-    "--no-sandbox",
-    "--disable-gpu",
-    "--disable-quic",
-    "--no-first-run",
-    "--disable-background-networking",
-    "--disable-component-update",
-    "--disable-sync",
-]
 VIEWPORT = {"width": 1400, "height": 900}
 LOGS = {
     "comma2k19": (DATA / "comma2k19" / "i280.mcap", CONFIGS / "comma2k19_i280.toml"),
     "husky": (DATA / "robot_localization" / "test1.bag", CONFIGS / "husky_test1.toml"),
 }
-
-
-def _free_port() -> int:
-    with socket.socket() as s:
-        s.bind(("127.0.0.1", 0))
-        return s.getsockname()[1]
 
 
 def _wait(predicate, timeout: float = 30.0, what: str = "condition"):
@@ -59,18 +43,6 @@ FRAME_RATE_JS = """() => new Promise(done => {
                       else done(n / 0.5); };
     requestAnimationFrame(f);
 })"""
-
-
-@pytest.fixture(scope="module")
-def browser():
-    if not CHROMIUM.exists():
-        pytest.skip("Debian chromium is not installed (apt-get install chromium)")
-    from playwright.sync_api import sync_playwright
-
-    with sync_playwright() as p:
-        b = p.chromium.launch(executable_path=str(CHROMIUM), headless=True, args=CHROMIUM_ARGS)
-        yield b
-        b.close()
 
 
 def _route_for(name: str, log_path: Path, tmp_path: Path) -> Path:
@@ -96,7 +68,7 @@ def test_inspector_shows_the_real_log(name, browser, tmp_path):
     route = _route_for(name, log_path, tmp_path)
     params = load_params(config)
     server, controller, app = start(
-        host="127.0.0.1", port=_free_port(), data_dirs=[], log=log_path, route=route, params=params
+        host="127.0.0.1", port=free_port(), data_dirs=[], log=log_path, route=route, params=params
     )
     page = None
     try:

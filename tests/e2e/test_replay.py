@@ -12,16 +12,6 @@ import pytest
 
 pytestmark = pytest.mark.e2e
 
-CHROMIUM = Path("/usr/bin/chromium")
-CHROMIUM_ARGS = [
-    "--no-sandbox",
-    "--disable-gpu",
-    "--disable-quic",
-    "--no-first-run",
-    "--disable-background-networking",
-    "--disable-component-update",
-    "--disable-sync",
-]
 VIEWPORT = {"width": 1000, "height": 700}
 TIMEOUT_MS = 180_000
 """generous: software WebGL on two shared cores"""
@@ -41,28 +31,20 @@ def replay(tmp_path_factory) -> Path:
 
 
 @pytest.fixture(scope="module")
-def page(replay):
-    if not CHROMIUM.exists():
-        pytest.skip("Debian chromium is not installed (apt-get install chromium)")
-    from playwright.sync_api import sync_playwright
-
-    with sync_playwright() as p:
-        browser = p.chromium.launch(
-            executable_path=str(CHROMIUM), headless=True, args=CHROMIUM_ARGS
-        )
-        context = browser.new_context(viewport=VIEWPORT, offline=True)
-        page = context.new_page()
-        page.set_default_timeout(TIMEOUT_MS)
-        failed: list[str] = []
-        page.on("requestfailed", lambda r: failed.append(r.url))
-        page.goto(replay.as_uri())
-        page.wait_for_selector("canvas", state="visible")
-        page.locator("[role=slider]").wait_for(state="attached")
-        # the "software WebGL" notice would count as drawn pixels
-        page.add_style_tag(content=".mantine-Notification-root { display: none !important; }")
-        page.failed_requests = failed  # type: ignore[attr-defined]
-        yield page
-        browser.close()
+def page(replay, browser):
+    context = browser.new_context(viewport=VIEWPORT, offline=True)
+    page = context.new_page()
+    page.set_default_timeout(TIMEOUT_MS)
+    failed: list[str] = []
+    page.on("requestfailed", lambda r: failed.append(r.url))
+    page.goto(replay.as_uri())
+    page.wait_for_selector("canvas", state="visible")
+    page.locator("[role=slider]").wait_for(state="attached")
+    # the "software WebGL" notice would count as drawn pixels
+    page.add_style_tag(content=".mantine-Notification-root { display: none !important; }")
+    page.failed_requests = failed  # type: ignore[attr-defined]
+    yield page
+    context.close()
 
 
 def _player_time(page) -> float:
