@@ -29,7 +29,10 @@ from .matching_kernels import (
     offset_polyline,
     pair_points,
     polyline_arrays,
+    project_window,
     rigid_fit,
+    segment_index,
+    segment_points,
     unit_interval,
 )
 from .params import Params
@@ -129,10 +132,33 @@ def shifted_route(
     parallel road does not loop either.
     """
     end = route.length if s1 is None else s1
-    out = offset_polyline(route.segment(s0, end), float(lateral_m))
+    out = offset_polyline(_segment_of(route, s0, end), float(lateral_m))
     if len(out) == 0:
         raise RouteError(route.source or None, "route piece to shift has no length")
     return _local_route(out, route)
+
+
+def _segment_of(route: Route, s0: float, s1: float) -> F64:
+    """``route.segment(s0, s1)``, compiled (bit for bit)."""
+    return segment_points(route.xy, route.s, route._unit, float(s0), float(s1))
+
+
+def _tangent(route: Route, s: float) -> F64:
+    """``route.tangent_at(s)[0]``, compiled (bit for bit)."""
+    return route._unit[segment_index(route.s, float(s))].copy()
+
+
+def _project_near(
+    route: Route, xy: ArrayLike, s_guess: ArrayLike, search_m: float
+) -> tuple[F64, F64]:
+    """``route.project(xy, s_guess, search_m)``'s arc lengths and lateral offsets, compiled
+    (bit for bit) for the matcher's few points per attempt."""
+    p = np.ascontiguousarray(np.atleast_2d(np.asarray(xy, np.float64))[:, :2])
+    g = np.ascontiguousarray(np.broadcast_to(np.asarray(s_guess, np.float64), (len(p),)))
+    s = np.empty(len(p))
+    lat = np.empty(len(p))
+    project_window(route.xy, route.s, route._unit, route._seglen, p, g, float(search_m), s, lat)
+    return s, lat
 
 
 def _local_route(xy: F64, like: Route) -> Route:
@@ -271,7 +297,7 @@ def route_arc_length(
         raise RoutefuseError(None, "route match: position to project is not finite")
     if s_guess is None:
         return float(project_on_route(route, p)[0][0])
-    return float(route.project(p, s_guess, params.window.route_search_m).s[0])
+    return float(_project_near(route, p, s_guess, params.window.route_search_m)[0][0])
 
 
 def learn_lane_offset(
@@ -552,8 +578,8 @@ def _fit(
 
     p_ref = rot @ p_dr + trans
     s_end = float(s[i1])
-    s_ref = s_end + float((p_ref - q[i1]) @ route.tangent_at(s_end)[0])
-    tangent = route.tangent_at(s_ref)[0]
+    s_ref = s_end + float((p_ref - q[i1]) @ _tangent(route, s_end))
+    tangent = _tangent(route, s_ref)
     normal = np.array([-tangent[1], tangent[0]])
     z = p_ref + lane_offset * normal
     if ext.geometry_covariance:
@@ -660,7 +686,7 @@ def _piece(
         piece = (
             shifted_route(route, lateral_m, s0=lo, s1=hi)
             if lateral_m
-            else _local_route(route.segment(lo, hi), route)
+            else _local_route(_segment_of(route, lo, hi), route)
         )
         if reverse:
             piece = _local_route(piece.xy[::-1], route)
@@ -745,7 +771,9 @@ def match_window(
     if s_guess is None or not np.isfinite(s_guess):
         s_anchor = float(project_on_route(route, win[0])[0][0])
     else:
-        s_anchor = float(route.project(win[0], s_guess - span, params.window.route_search_m).s[0])
+        s_anchor = float(
+            _project_near(route, win[0], s_guess - span, params.window.route_search_m)[0][0]
+        )
     ext = params.extensions
     lane_path = ext.lane_path_matching and abs(lane) > 1e-3
     pad = params.window.along_search_m + 2.0 * h
@@ -797,9 +825,9 @@ def match_window(
     p_ref = fit.z - lane * fit.normal
     if lane_path:
         ends = fit.route_points[np.flatnonzero(fit.valid)[[0, -1]]] - lane * fit.normal
-        route_s = route.project(
-            ends, s_anchor + fit.along_offset + np.array([0.0, span]), pad + 10.0
-        ).s
+        route_s = _project_near(
+            route, ends, s_anchor + fit.along_offset + np.array([0.0, span]), pad + 10.0
+        )[0]
         s0, s1 = float(route_s[0]), float(route_s[1])
     else:
         s0, s1 = fit.s_first, fit.s_first + (fit.n_pairs - 1) * h
@@ -867,7 +895,7 @@ def match_window(
         gates=tuple(gates),
         window_dr=win[fit.valid],
         route_points=fit.route_points[fit.valid],
-        route_segment=route.segment(s0, s1),
+        route_segment=_segment_of(route, s0, s1),
         route_s=(s0, s1),
         n_pairs=fit.n_pairs,
         rotation_rad=fit.angle,

@@ -249,3 +249,100 @@ def unit_interval(x: F64, chi: F64, k: int) -> tuple[bool, float, float]:
                 break
             i = j
     return True, ends[0], ends[1]
+
+
+@njit(cache=True)
+def segment_index(rs: F64, s: float) -> int:
+    """``Route._segment_index``: the segment an arc length falls in (searchsorted right - 1,
+    clipped to the segments)."""
+    nseg = rs.shape[0] - 1
+    lo, hi = 0, rs.shape[0]
+    while lo < hi:
+        mid = (lo + hi) // 2
+        if rs[mid] <= s:
+            lo = mid + 1
+        else:
+            hi = mid
+    return min(max(lo - 1, 0), nseg - 1)
+
+
+@njit(cache=True)
+def segment_points(xy: F64, rs: F64, unit: F64, s0: float, s1: float) -> F64:
+    """``Route.segment(s0, s1)``: the polyline between two arc lengths with the vertices
+    strictly inside, bit for bit."""
+    n = rs.shape[0]
+    # vertices with s0 < rs < s1
+    lo, hi = 0, n
+    while lo < hi:
+        mid = (lo + hi) // 2
+        if rs[mid] <= s0:
+            lo = mid + 1
+        else:
+            hi = mid
+    first = lo
+    lo, hi = 0, n
+    while lo < hi:
+        mid = (lo + hi) // 2
+        if rs[mid] < s1:
+            lo = mid + 1
+        else:
+            hi = mid
+    inner = max(lo - first, 0)
+    out = np.empty((inner + 2, 2))
+    i = segment_index(rs, s0)
+    out[0, 0] = xy[i, 0] + (s0 - rs[i]) * unit[i, 0]
+    out[0, 1] = xy[i, 1] + (s0 - rs[i]) * unit[i, 1]
+    for k in range(inner):
+        out[k + 1, 0] = xy[first + k, 0]
+        out[k + 1, 1] = xy[first + k, 1]
+    i = segment_index(rs, s1)
+    out[inner + 1, 0] = xy[i, 0] + (s1 - rs[i]) * unit[i, 0]
+    out[inner + 1, 1] = xy[i, 1] + (s1 - rs[i]) * unit[i, 1]
+    return out
+
+
+@njit(cache=True)
+def project_window(
+    xy: F64,
+    rs: F64,
+    unit: F64,
+    seglen: F64,
+    pts: F64,
+    s_guess: F64,
+    search_m: float,
+    s_out: F64,
+    lat_out: F64,
+) -> None:
+    """``Route.project(pts, s_guess, search_m)`` (``search_m`` >= 0): arc length and signed
+    lateral offset of the nearest foot point on the stretch [guess - search, guess + search]
+    (clipped inside long segments too), bit for bit; the first of equal distances wins, as
+    numpy's argmin."""
+    for p in range(pts.shape[0]):
+        x, y = pts[p, 0], pts[p, 1]
+        s_lo = s_guess[p] - search_m
+        s_hi = s_guess[p] + search_m
+        best = np.inf
+        best_s = 0.0
+        fx = fy = 0.0
+        for j in range(segment_index(rs, s_lo), segment_index(rs, s_hi) + 1):
+            along = (x - xy[j, 0]) * unit[j, 0] + (y - xy[j, 1]) * unit[j, 1]
+            lo_a = max(0.0, s_lo - rs[j])
+            hi_a = max(lo_a, min(seglen[j], s_hi - rs[j]))
+            along = min(max(along, lo_a), hi_a)
+            footx = xy[j, 0] + along * unit[j, 0]
+            footy = xy[j, 1] + along * unit[j, 1]
+            ex = x - footx
+            ey = y - footy
+            d2 = ex * ex + ey * ey
+            if d2 < best:
+                best = d2
+                best_s = rs[j] + along
+                fx, fy = footx, footy
+        s_out[p] = best_s
+        rx, ry = x - fx, y - fy
+        t = segment_index(rs, best_s)
+        lat = unit[t, 0] * ry - unit[t, 1] * rx
+        dist = np.hypot(rx, ry)
+        if abs(lat) < dist - 1e-9:
+            lat = np.sign(lat) * dist
+        lat_out[p] = lat

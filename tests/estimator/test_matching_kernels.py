@@ -321,6 +321,29 @@ def test_mahalanobis_is_the_solve(seed):
     assert matching._mahalanobis2(nu, np.zeros((2, 2))) == float("inf")
 
 
+@pytest.mark.parametrize("seed", range(20))
+def test_segment_tangent_and_projection_are_the_route_methods(seed):
+    rng = np.random.default_rng(seed)
+    route = Route(_random_polyline(rng, 60))
+    for _ in range(20):
+        s0, s1 = np.sort(rng.uniform(-0.1, 1.1, 2) * route.length)
+        if rng.uniform() < 0.2:
+            s0 = s1 = float(route.s[rng.integers(0, len(route.s))])  # on a vertex
+        if rng.uniform() < 0.1:
+            s0, s1 = s1, s0
+        np.testing.assert_array_equal(matching._segment_of(route, s0, s1), route.segment(s0, s1))
+        np.testing.assert_array_equal(matching._tangent(route, s0), route.tangent_at(s0)[0])
+    pts = route.point_at(rng.uniform(-50, route.length + 50, 30)) + rng.normal(0, 20, (30, 2))
+    guess = rng.uniform(0, route.length, 30)
+    for search in (0.0, 5.0, 60.0, 2.0 * route.length):
+        s, lat = matching._project_near(route, pts, guess, search)
+        ref = route.project(pts, guess, search)
+        np.testing.assert_array_equal(s, ref.s)
+        np.testing.assert_array_equal(lat, ref.lateral)
+    one = matching._project_near(route, pts[0], 10.0, 60.0)
+    np.testing.assert_array_equal(one[0], route.project(pts[0], 10.0, 60.0).s)
+
+
 # ---------------------------------------------------------------------------------------------
 # end to end
 
