@@ -817,7 +817,7 @@ class _Driver:
                 self.aux,
                 self.inp.cfg,
                 np.asarray(rec.pseudo_position, float),
-                np.asarray(rec.obs_cov, float),
+                _applied_obs_cov(rec, self.p),
             )
             innovation, correction = res[:2].copy(), res[2:].copy()
             heading = _heading_observation(rec, self.p)
@@ -1060,6 +1060,28 @@ def _max_turn_deg(xy: F64, stretch_m: float, spacing_m: float) -> float:
         return float(np.degrees(np.ptp(heading)))
     win = np.lib.stride_tricks.sliding_window_view(heading, n + 1)
     return float(np.degrees(np.max(win.max(axis=1) - win.min(axis=1))))
+
+
+UNOBSERVED_VAR = 1e8
+"""m^2: the along-track variance a match that does not observe along-track is applied with."""
+
+
+def _applied_obs_cov(rec: MatchRecord, p: Params) -> F64:
+    """The covariance an accepted match updates the filter with.
+
+    Where route shape leaves along-track unobserved, the record says so with
+    ``pseudo.along_sigma_max_m`` (100 m). Applied as it is, once a second, that would still be
+    information: 350 such updates in a straight tunnel claim along-track to 100 / sqrt(350) = 5 m
+    when nothing was observed, which without wheel speed (along-track drifting by hundreds of
+    metres) makes the filter confident of a position it never measured and then reject the
+    bends that do observe it. So the along-track axis is applied as unobserved (cross-track
+    only). Only with ``extensions.geometry_covariance``; the paper's isotropic R is kept."""
+    cov = np.asarray(rec.obs_cov, float)
+    if not (p.extensions.geometry_covariance and rec.extra.get("along_observed", 1.0) == 0.0):
+        return cov
+    w, v = np.linalg.eigh(0.5 * (cov + cov.T))
+    w[-1] = max(w[-1], UNOBSERVED_VAR)
+    return (v * w) @ v.T
 
 
 def _heading_observation(rec: MatchRecord, p: Params) -> tuple[float, float] | None:
