@@ -633,24 +633,30 @@ def _gate(
 
 
 def _shape_gates(fit: _Fit, params: Params) -> list[GateDecision]:
+    return _shape_gates_of(_shape_values(fit), params)
+
+
+def _shape_values(fit: _Fit) -> tuple[float, float, float, float]:
+    """What the shape gates test: pairs, heading cosine, residual, |rotation| in degrees."""
+    return (fit.n_pairs, fit.heading_cos, fit.residual, float(np.degrees(abs(fit.angle))))
+
+
+def _shape_gates_of(
+    values: tuple[float, float, float, float], params: Params
+) -> list[GateDecision]:
     g = params.gates
+    n_pairs, heading_cos, residual, rotation_deg = values
     return [
-        _gate("min_pairs", fit.n_pairs, g.min_pairs, ">=", "valid window/route point pairs"),
+        _gate("min_pairs", n_pairs, g.min_pairs, ">=", "valid window/route point pairs"),
         _gate(
             "heading",
-            fit.heading_cos,
+            heading_cos,
             float(np.cos(np.radians(g.max_heading_diff_deg))),
             ">=",
             "signed cosine between DR and route end directions",
         ),
-        _gate("residual", fit.residual, g.max_residual_m, "<=", "RMS of the rigid fit, m"),
-        _gate(
-            "rotation",
-            float(np.degrees(abs(fit.angle))),
-            g.max_rotation_deg,
-            "<=",
-            "fitted rotation, deg",
-        ),
+        _gate("residual", residual, g.max_residual_m, "<=", "RMS of the rigid fit, m"),
+        _gate("rotation", rotation_deg, g.max_rotation_deg, "<=", "fitted rotation, deg"),
     ]
 
 
@@ -741,6 +747,60 @@ def _check_inputs(
     return w, p, 0.5 * (cov + cov.T)
 
 
+@dataclass(frozen=True)
+class MatchGeometry:
+    """What a match attempt computes before any quality gate: the resampled window, where it
+    anchors on the route, the candidate's fit and the rivals' fits.
+
+    It depends on the attempt's inputs and on :func:`geometry_params` only, not on the gate
+    thresholds, so after a gate change the runner re-judges the attempts it shares with the
+    previous run (:func:`judge_match`) instead of fitting them again."""
+
+    win: F64
+    p_dr: F64
+    cov: F64
+    lane: float
+    lane_path: bool
+    s_anchor: float
+    span: float
+    fit: _Fit | None
+    route_s: tuple[float, float]
+    route_segment: F64
+    rivals: dict[str, _Fit | None] | None
+    """None when ``extensions.candidate_validation`` is off"""
+    scores: _Scores | None = None
+    """the values the gates test (None without a fit)"""
+
+
+@dataclass(frozen=True)
+class _Scores:
+    """The gate values of a fitted attempt and the record's extras; they depend on the geometry
+    and the pseudo-observation parameters, not on the thresholds."""
+
+    nu: F64
+    p_ref: F64
+    shape: tuple[float, float, float, float]
+    extra: dict[str, float]
+    d2: float
+    jump: float
+    cost: float
+    rivals: tuple[tuple[str, tuple[float, float, float, float], float], ...]
+    """(name, shape values, cost) of each rival that could be fitted"""
+    correction: float
+
+
+def geometry_params(params: Params) -> tuple:
+    """The parameters a :class:`MatchGeometry` depends on: all matching parameters except the
+    gate thresholds (the rivals' lateral shift is geometry)."""
+    return (
+        params.window,
+        params.pseudo,
+        params.offset,
+        params.extensions,
+        params.gates.alternative_shift_m,
+    )
+
+
 def match_window(
     window_xy: ArrayLike,
     p_dr: ArrayLike,
@@ -762,6 +822,23 @@ def match_window(
     ``lane_offset``: learned lateral offset, positive = vehicle left of the route. The record's
     ``innovation`` is z - p_dr and ``correction`` is zero: the caller fills in what it applied.
     """
+    geometry = match_geometry(
+        window_xy, p_dr, pos_cov2, route, s_guess=s_guess, lane_offset=lane_offset, params=params
+    )
+    return judge_match(geometry, params, index=index, t=t, epoch=epoch)
+
+
+def match_geometry(
+    window_xy: ArrayLike,
+    p_dr: ArrayLike,
+    pos_cov2: ArrayLike,
+    route: Route,
+    *,
+    s_guess: float | None,
+    lane_offset: float,
+    params: Params,
+) -> MatchGeometry:
+    """The fits of :func:`match_window` (same arguments), before its gates."""
     win_raw, p, cov = _check_inputs(window_xy, p_dr, pos_cov2)
     enabled = params.offset.enabled and np.isfinite(lane_offset)
     lane = float(lane_offset) if enabled else 0.0
@@ -784,6 +861,96 @@ def match_window(
             fit = _fit(win, p, cand, _anchor(cand, win[0]), 0.0, params)
         else:
             fit = _fit(win, p, cand, s_anchor, lane, params)
+    if fit is None:
+        return MatchGeometry(
+            win=win,
+            p_dr=p,
+            cov=cov,
+            lane=lane,
+            lane_path=lane_path,
+            s_anchor=s_anchor,
+            span=span,
+            fit=None,
+            route_s=(s_anchor, s_anchor),
+            route_segment=np.empty((0, 2)),
+            rivals=None,
+        )
+    if lane_path:
+        ends = fit.route_points[np.flatnonzero(fit.valid)[[0, -1]]] - lane * fit.normal
+        route_s = _project_near(
+            route, ends, s_anchor + fit.along_offset + np.array([0.0, span]), pad + 10.0
+        )[0]
+        s0, s1 = float(route_s[0]), float(route_s[1])
+    else:
+        s0, s1 = fit.s_first, fit.s_first + (fit.n_pairs - 1) * h
+    rivals = (
+        _rivals(win, p, route, s_anchor, lane, lane_path, params)
+        if ext.candidate_validation
+        else None
+    )
+    nu = fit.z - p
+    extra: dict[str, float] = {
+        "anchor_s": s_anchor,
+        "window_length_m": span,
+        "along_offset_m": fit.along_offset,
+        "along_curvature": fit.along_curvature,
+        "along_sigma_m": fit.along_sigma,
+        "along_observed": float(fit.along_observed),
+        "cross_sigma_m": float(np.sqrt(fit.normal @ fit.obs_cov @ fit.normal)),
+        "lane_path": float(lane_path),
+        "innovation_along_m": float(nu @ fit.tangent),
+        "innovation_cross_m": float(nu @ fit.normal),
+        "heading_sigma_rad": _rotation_sigma(win, fit, cov, params),
+    }
+    d2 = jump = cost = float("nan")
+    rival_scores: list[tuple[str, tuple[float, float, float, float], float]] = []
+    if rivals is not None:
+        d2 = _mahalanobis2(nu, cov + fit.obs_cov)
+        extra["mahalanobis_d2"] = d2
+        jump = abs(float(nu @ fit.normal))
+        cost = _rival_cost(fit, p, cov, params)
+        extra["cost"] = cost
+        for name, rival in rivals.items():
+            if rival is None:
+                continue
+            rival_cost = _rival_cost(rival, p, cov, params)
+            extra[f"cost_{name}"] = rival_cost
+            extra[f"residual_{name}_m"] = rival.residual
+            rival_scores.append((name, _shape_values(rival), rival_cost))
+    scores = _Scores(
+        nu=nu,
+        p_ref=fit.z - lane * fit.normal,
+        shape=_shape_values(fit),
+        extra=extra,
+        d2=d2,
+        jump=jump,
+        cost=cost,
+        rivals=tuple(rival_scores),
+        correction=float(np.hypot(*nu)),
+    )
+    return MatchGeometry(
+        win=win,
+        p_dr=p,
+        cov=cov,
+        lane=lane,
+        lane_path=lane_path,
+        s_anchor=s_anchor,
+        span=span,
+        fit=fit,
+        route_s=(s0, s1),
+        route_segment=_segment_of(route, s0, s1),
+        rivals=rivals,
+        scores=scores,
+    )
+
+
+def judge_match(
+    geometry: MatchGeometry, params: Params, *, index: int, t: float, epoch: int
+) -> MatchRecord:
+    """The gates of one attempt on its geometry (computed with the same
+    :func:`geometry_params`): the record :func:`match_window` returns."""
+    win, p, lane, span = geometry.win, geometry.p_dr, geometry.lane, geometry.span
+    s_anchor, fit = geometry.s_anchor, geometry.fit
     nan2 = np.full(2, np.nan)
     if fit is None:
         gates = (
@@ -820,60 +987,35 @@ def match_window(
             extra={"anchor_s": s_anchor, "window_length_m": span},
         )
 
-    gates = _shape_gates(fit, params)
-    nu = fit.z - p
-    p_ref = fit.z - lane * fit.normal
-    if lane_path:
-        ends = fit.route_points[np.flatnonzero(fit.valid)[[0, -1]]] - lane * fit.normal
-        route_s = _project_near(
-            route, ends, s_anchor + fit.along_offset + np.array([0.0, span]), pad + 10.0
-        )[0]
-        s0, s1 = float(route_s[0]), float(route_s[1])
-    else:
-        s0, s1 = fit.s_first, fit.s_first + (fit.n_pairs - 1) * h
-    s_cov = cov + fit.obs_cov
-    extra: dict[str, float] = {
-        "anchor_s": s_anchor,
-        "window_length_m": span,
-        "along_offset_m": fit.along_offset,
-        "along_curvature": fit.along_curvature,
-        "along_sigma_m": fit.along_sigma,
-        "along_observed": float(fit.along_observed),
-        "cross_sigma_m": float(np.sqrt(fit.normal @ fit.obs_cov @ fit.normal)),
-        "lane_path": float(lane_path),
-        "innovation_along_m": float(nu @ fit.tangent),
-        "innovation_cross_m": float(nu @ fit.normal),
-        "heading_sigma_rad": _rotation_sigma(win, fit, cov, params),
-    }
-    if ext.candidate_validation:
+    sc = geometry.scores
+    assert sc is not None
+    gates = _shape_gates_of(sc.shape, params)
+    nu, p_ref = sc.nu, sc.p_ref
+    s0, s1 = geometry.route_s
+    extra = dict(sc.extra)
+    if geometry.rivals is not None:
         g = params.gates
-        d2 = _mahalanobis2(nu, s_cov)
-        extra["mahalanobis_d2"] = d2
         gates.append(
             _gate(
-                "mahalanobis", d2, g.mahalanobis_chi2, "<=", "innovation chi-square, S = P_EN + R_k"
+                "mahalanobis",
+                sc.d2,
+                g.mahalanobis_chi2,
+                "<=",
+                "innovation chi-square, S = P_EN + R_k",
             )
         )
-        jump = abs(float(nu @ fit.normal))
         gates.append(
             _gate(
                 "lane_continuity",
-                jump,
+                sc.jump,
                 g.max_lateral_jump_m,
                 "<=",
                 "move across the route away from the learned lane, m",
             )
         )
-        cost = _rival_cost(fit, p, cov, params)
-        extra["cost"] = cost
-        for name, rival in _rivals(win, p, route, s_anchor, lane, lane_path, params).items():
-            if rival is None:
-                continue
-            plausible = all(d.passed for d in _shape_gates(rival, params))
-            rival_cost = _rival_cost(rival, p, cov, params)
-            extra[f"cost_{name}"] = rival_cost
-            extra[f"residual_{name}_m"] = rival.residual
-            margin = rival_cost - cost if plausible else float("inf")
+        for name, shape, rival_cost in sc.rivals:
+            plausible = all(d.passed for d in _shape_gates_of(shape, params))
+            margin = rival_cost - sc.cost if plausible else float("inf")
             note = (
                 f"rival cost minus candidate cost ({name} "
                 + (f"shift {g.alternative_shift_m:g} m)" if name != "reversed" else "direction)")
@@ -882,9 +1024,8 @@ def match_window(
             gates.append(
                 _gate(f"alternative_{name}", min(margin, 1e9), g.alternative_margin, ">=", note)
             )
-    correction = float(np.hypot(*nu))
     gates.append(
-        _gate("correction_cap", correction, params.gates.max_correction_m, "<=", "|z - p_dr|, m")
+        _gate("correction_cap", sc.correction, params.gates.max_correction_m, "<=", "|z - p_dr|, m")
     )
     accepted = all(d.passed for d in gates)
     return MatchRecord(
@@ -895,7 +1036,7 @@ def match_window(
         gates=tuple(gates),
         window_dr=win[fit.valid],
         route_points=fit.route_points[fit.valid],
-        route_segment=_segment_of(route, s0, s1),
+        route_segment=geometry.route_segment,
         route_s=(s0, s1),
         n_pairs=fit.n_pairs,
         rotation_rad=fit.angle,

@@ -2,10 +2,14 @@
 
 The compiled loop (:func:`estimator.ekf.run_until`) runs from one stop time to the next; the
 driver steps in only at the start of each degraded interval and at each match attempt, where it
-saves a checkpoint (the filter's plain arrays), builds the DR window, calls
-:func:`estimator.matching.match_window` and, if the match is accepted, applies the E/N
+saves a checkpoint (the filter's plain arrays), builds the DR window, matches it
+(:func:`estimator.matching.match_geometry`, then :func:`~estimator.matching.judge_match`: what
+:func:`~estimator.matching.match_window` does) and, if the match is accepted, applies the E/N
 pseudo-position update. A later run with other matching parameters resumes from the first
-checkpoint whose outcome changes (``run(..., reuse=previous)``) instead of from the log start.
+checkpoint whose outcome changes (``run(..., reuse=previous)``) instead of from the log start;
+the attempts before it are only re-judged (the previous run's geometries are kept by their
+inputs, and a gate threshold does not change them), and a baseline after a baseline is the
+previous run.
 
 When GNSS returns after pseudo-position updates, the first fix widens the E/N position variance
 just enough to cover its own innovation (``ekf._widen_position``) before it is tested: the route
@@ -19,9 +23,11 @@ cross-covariances exactly as in normal fusion.
 from __future__ import annotations
 
 import dataclasses
+import hashlib
 import math
 from collections.abc import Callable, Sequence
 from dataclasses import dataclass, field
+from typing import Any
 
 import numpy as np
 from numpy.typing import NDArray
@@ -31,7 +37,15 @@ from . import ekf
 from .errors import LogError, RoutefuseError
 from .geo import LocalFrame
 from .log import Log
-from .matching import learn_lane_offset, match_window, resample_polyline, route_arc_length
+from .matching import (
+    MatchGeometry,
+    geometry_params,
+    judge_match,
+    learn_lane_offset,
+    match_geometry,
+    resample_polyline,
+    route_arc_length,
+)
 from .params import Method, Params, for_method
 from .results import Epochs, MatchRecord, Run
 from .route import Route
@@ -101,6 +115,10 @@ class _Resume:
     n_out: int
     checkpoints: tuple[_Checkpoint, ...]
     records: tuple[MatchRecord, ...]
+    memo: dict = field(default_factory=dict)
+    """match geometries and long-window turns by their inputs (:meth:`_Driver._memo`), for a
+    re-run to re-judge its shared attempts instead of fitting them again"""
+    dropped_fixes: tuple[float, ...] = ()
 
 
 # ---------------------------------------------------------------------------------------------
@@ -152,6 +170,7 @@ def run(
     inputs = old.inputs if old is not None else _prepare(log, p, frame, outages_t)
     driver = _Driver(log, route, p, matching, inputs, progress)
     if old is not None:
+        driver.known_memo = old.memo
         driver.resume(
             old,
             reuse.params if reuse is not None else p,
@@ -173,6 +192,8 @@ def run(
         n_out=int(driver.idx[ekf.I_OUT]),
         checkpoints=tuple(driver.checkpoints),
         records=tuple(driver.records),
+        memo=driver.memo,
+        dropped_fixes=tuple(driver.dropped_fixes),
     )
     return Run(
         method=method,
@@ -578,6 +599,10 @@ class _Driver:
     track: _Track = field(default_factory=_Track)
     dropped_fixes: list[float] = field(default_factory=list)
     """times of the fixes the fixed-lag re-runs left out"""
+    memo: dict[tuple, Any] = field(default_factory=dict)
+    """this run's match geometries and long-window turns, by their inputs"""
+    known_memo: dict[tuple, Any] = field(default_factory=dict)
+    """the previous run's, when this one reuses it"""
 
     # --- state handling
     def _set_state(self, x: F64, P: F64, aux: F64, idx: NDArray[np.int64]) -> None:
@@ -732,9 +757,16 @@ class _Driver:
         dist = out[:n_out, ekf.O_DIST]
         d_now = float(aux[ekf.A_DIST])
         i0 = max(int(np.searchsorted(dist, d_now - length_m, side="right")) - 1, 0)
-        dr = np.vstack([out[i0:n_out, ekf.O_DR : ekf.O_DR + 2], aux[ekf.A_DR : ekf.A_DR + 2]])
-        d = np.r_[dist[i0:], d_now]
-        keep = np.r_[np.diff(d) > 1e-6, True]
+        m = n_out - i0
+        dr = np.empty((m + 1, 2))
+        dr[:m] = out[i0:n_out, ekf.O_DR : ekf.O_DR + 2]
+        dr[m] = aux[ekf.A_DR : ekf.A_DR + 2]
+        d = np.empty(m + 1)
+        d[:m] = dist[i0:]
+        d[m] = d_now
+        keep = np.empty(m + 1, bool)
+        keep[:m] = (d[1:] - d[:-1]) > 1e-6
+        keep[m] = True
         dr = dr[keep]
         return dr + (x[:2] - aux[ekf.A_DR : ekf.A_DR + 2])
 
@@ -755,17 +787,9 @@ class _Driver:
         w = self.p.window
 
         def attempt(window_xy: F64, params: Params) -> MatchRecord:
-            return match_window(
-                window_xy,
-                x[:2].copy(),
-                P[6:8, 6:8].copy(),
-                self.route,
-                s_guess=pred,
-                lane_offset=tr.lane,
-                params=params,
-                index=len(self.records),
-                t=float(aux[ekf.A_TIME]),
-                epoch=n_out,
+            geometry = self._geometry(window_xy, x[:2].copy(), P[6:8, 6:8].copy(), pred, params)
+            return judge_match(
+                geometry, params, index=len(self.records), t=float(aux[ekf.A_TIME]), epoch=n_out
             )
 
         rec = attempt(self._window(out, n_out, x, aux, w.length_m), self.p)
@@ -777,7 +801,11 @@ class _Driver:
         ):
             return rec
         long_xy = self._window(out, n_out, x, aux, w.long_length_m)
-        turn = _max_turn_deg(long_xy, w.length_m, w.spacing_m)
+        turn = self._memo(
+            ("turn", w.length_m, w.spacing_m),
+            (long_xy,),
+            lambda: _max_turn_deg(long_xy, w.length_m, w.spacing_m),
+        )
         if turn > w.long_max_turn_deg:
             return rec
         # map and DR shape errors are correlated over tens of metres: the long window's points
@@ -797,6 +825,37 @@ class _Driver:
             "short_window_length_m": rec.extra.get("window_length_m", w.length_m),
         }
         return dataclasses.replace(long, extra=extra)
+
+    def _memo(self, key: tuple, arrays: tuple[F64, ...], compute: Callable[[], Any]) -> Any:
+        """``compute()``, or the value this run or the previous one computed for the same key
+        and array contents."""
+        digest = hashlib.blake2b(digest_size=16)
+        for a in arrays:
+            a = np.ascontiguousarray(a, np.float64)
+            digest.update(repr(a.shape).encode())
+            digest.update(a.tobytes())
+        full = (*key, digest.digest())
+        value = self.known_memo.get(full, self.memo.get(full))
+        if value is None:
+            value = compute()
+        self.memo[full] = value
+        return value
+
+    def _geometry(
+        self, window_xy: F64, p_dr: F64, cov: F64, pred: float | None, params: Params
+    ) -> MatchGeometry:
+        """:func:`match_geometry` of an attempt, or the previous run's for the same inputs
+        (window, position, covariance, route guess, lane offset and the parameters the geometry
+        depends on): after a gate change the attempts before the first changed outcome are only
+        re-judged, not fitted again."""
+        lane = self.track.lane
+        return self._memo(
+            ("geometry", pred, lane, geometry_params(params)),
+            (window_xy, p_dr, cov),
+            lambda: match_geometry(
+                window_xy, p_dr, cov, self.route, s_guess=pred, lane_offset=lane, params=params
+            ),
+        )
 
     def _after_match(self, rec: MatchRecord, x_after: F64, aux: F64) -> None:
         if rec.accepted:
@@ -895,6 +954,11 @@ class _Driver:
             self.p.trigger == old_params.trigger
             and self.p.extensions.heading_observation == old_params.extensions.heading_observation
         )
+        if not self.matching and not reuse_matching:
+            # baseline after baseline: the filter and its inputs are the same, so is the run
+            self._copy_old(old, len(old.checkpoints), old.n_out)
+            self.records = []
+            return
         if not self.matching or not reuse_matching or not same_trigger:
             if not outage_cps:
                 self._copy_old(old, len(old.checkpoints), old.n_out)
@@ -936,6 +1000,7 @@ class _Driver:
         self.records = records
 
     def _copy_old(self, old: _Resume, n_checkpoints: int, n_out: int) -> None:
+        self.dropped_fixes = list(old.dropped_fixes)
         self.out = old.out
         self.checkpoints = list(old.checkpoints[:n_checkpoints])
         self.idx = np.zeros(ekf.NI, np.int64)
@@ -946,6 +1011,7 @@ class _Driver:
     ) -> None:
         self.checkpoints = list(old.checkpoints[:n_keep])
         self.records = list(records)
+        self.dropped_fixes = [t for t in old.dropped_fixes if t <= cp.aux[ekf.A_TIME]]
         self._set_state(cp.x, cp.P, cp.aux, cp.idx)
         self.out = old.out.copy()
 

@@ -357,3 +357,55 @@ def test_heading_observation_is_applied_and_recorded(tunnel, tunnel_proposed):
     assert not any("heading_obs_rad" in m.extra for m in tunnel_proposed.matches)
     again = run(log, route, p, method="proposed", frame=frame, reuse=tunnel_proposed)
     assert _same_epochs(again, r)
+
+
+def test_baseline_after_baseline_reuses_the_whole_run(tunnel, monkeypatch):
+    """Matching parameters do not touch the baseline: the re-run is the previous run."""
+    log, route, frame = tunnel
+    base = run(log, route, Params(), method="baseline", frame=frame)
+    p = with_values(Params(), {"gates.max_residual_m": 0.5, "window.length_m": 150.0})
+    fresh = run(log, route, p, method="baseline", frame=frame)
+    from estimator import runner
+
+    def no_filter(*args, **kwargs):
+        raise AssertionError("the filter ran")
+
+    monkeypatch.setattr(runner.ekf, "run_until", no_filter)
+    again = run(log, route, p, method="baseline", frame=frame, reuse=base)
+    assert _same_epochs(again, fresh) and again.params == p and again.matches == ()
+    assert again.dropped_fix_times == fresh.dropped_fix_times
+
+
+@pytest.mark.parametrize(
+    "change",
+    [{"gates.max_residual_m": 2.9}, {"gates.min_pairs": 52}, {"gates.max_rotation_deg": 1}],
+)
+def test_a_gate_change_refits_no_attempt_before_the_first_changed_outcome(
+    tunnel, tunnel_proposed, monkeypatch, change
+):
+    log, route, frame = tunnel
+    p = with_values(Params(), change)
+    fresh = run(log, route, p, method="proposed", frame=frame)
+    changed = [
+        i
+        for i, (a, b) in enumerate(zip(fresh.matches, tunnel_proposed.matches, strict=False))
+        if a.accepted != b.accepted
+    ]
+    from estimator import runner
+
+    fits = []
+    real = runner.match_geometry
+
+    def counting(*args, **kwargs):
+        fits.append(1)
+        return real(*args, **kwargs)
+
+    monkeypatch.setattr(runner, "match_geometry", counting)
+    again = run(log, route, p, method="proposed", frame=frame, reuse=tunnel_proposed)
+    assert _same_epochs(again, fresh)
+    assert [m.gates for m in again.matches] == [m.gates for m in fresh.matches]
+    if not changed:
+        assert not fits  # only re-judged
+    else:
+        # live again from the first changed attempt on (long windows may add fits)
+        assert 0 < len(fits) <= 2 * (len(fresh.matches) - changed[0])
