@@ -268,7 +268,9 @@ class ExtensionParams:
     )
     heading_observation: bool = param(False, "feed the fitted rotation as a heading observation")
     robust_gnss: bool = param(
-        True, "test fixes against dead-reckoned motion; drop disagreeing fixes before outages"
+        True,
+        "test each fix against the filter with the typical fix variance and inflate the "
+        "disagreeing ones; after a gap, use fixes only once they agree with each other",
     )
     portal_rerun: bool = param(
         True,

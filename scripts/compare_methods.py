@@ -1,0 +1,208 @@
+#!/usr/bin/env python3
+"""Paper vs routefuse vs baseline on every bundled sample log; writes the measured tables of
+``docs/method.md`` and the README's "Results" section.
+
+    python scripts/compare_methods.py           # print the tables (about 2-4 minutes on 2 cores)
+    python scripts/compare_methods.py --write   # also replace them in docs/method.md and README.md
+
+It runs what ``routefuse run LOG --route ROUTE --method baseline proposed paper
+--subtract-lane-offset`` runs (:func:`estimator.runner.run`,
+:func:`estimator.metrics.method_metrics` over the GNSS-degraded intervals, route deviations
+measured from the learned lane) with the default parameters, plus:
+
+- ``routefuse + heading obs.``: ``extensions.heading_observation = true``;
+- ``no wheel``: the same log with its wheel-speed topic dropped (IMU + GNSS only);
+- one row per extension switched off alone (the ablation table);
+- the entry error at each tunnel portal with and without the fixed-lag re-run.
+
+Every number in those tables comes from this script; rerun it after changing the estimator.
+"""
+
+from __future__ import annotations
+
+import argparse
+import dataclasses
+import re
+import sys
+import time
+from pathlib import Path
+
+import numpy as np
+
+REPO = Path(__file__).resolve().parents[1]
+sys.path.insert(0, str(REPO))
+
+from estimator.inputs import open_inputs  # noqa: E402
+from estimator.log import Log  # noqa: E402
+from estimator.metrics import (  # noqa: E402
+    MethodMetrics,
+    RouteDeviation,
+    deviation_series,
+    format_table,
+    match_summary,
+    method_metrics,
+)
+from estimator.params import ExtensionParams, Method, Params, with_values  # noqa: E402
+from estimator.results import Run  # noqa: E402
+from estimator.route import Route  # noqa: E402
+from estimator.runner import run  # noqa: E402
+
+SAMPLES = ("long_tunnel", "spiral_tunnel", "multi_tunnel", "monaco_tunnel")
+PAPER_SCENARIO = {
+    "long_tunnel": "Long tunnel",
+    "spiral_tunnel": "Curved tunnel",
+    "multi_tunnel": "Multi-segment",
+    "monaco_tunnel": "Curved tunnel",
+}
+PUBLISHED = {
+    # the paper's rows (../shared/method.md): max, mean, RMSE pos. dev., mean, RMSE heading dev.
+    ("Long tunnel", "Baseline"): (386.3, 142.909, 186.821, 2.073, 3.524),
+    ("Long tunnel", "Proposed"): (22.7, 0.745, 1.672, 0.048, 1.257),
+    ("Curved tunnel", "Baseline"): (32.6, 7.908, 10.376, -0.216, 0.793),
+    ("Curved tunnel", "Proposed"): (27.5, 1.431, 1.889, -0.179, 0.946),
+    ("Multi-segment", "Baseline"): (23.3, 3.576, 6.502, 0.011, 1.839),
+    ("Multi-segment", "Proposed"): (8.5, 1.755, 2.351, 0.018, 1.332),
+}
+MARK = "<!-- compare_methods.py: {} -->"
+ENTRY_HEAD = "| log | outage start [s] | re-run off [m] | re-run on [m] |"
+MATCH_HEAD = "| log | paper: accepted / attempted | routefuse: accepted / attempted |"
+
+
+def _published(scenario: str, method: str) -> MethodMetrics:
+    return MethodMetrics(RouteDeviation(*PUBLISHED[(scenario, method)]), None, 0)
+
+
+def _run(log: Log, route: Route, frame, params: Params, method: Method, reuse=None) -> Run:
+    return run(log, route, params, method=method, frame=frame, reuse=reuse)
+
+
+def _metrics(r: Run, route: Route, log: Log) -> MethodMetrics:
+    return method_metrics(r, route, log, subtract_lane_offset=True, params=r.params)
+
+
+def _entry_errors(r: Run, route: Route, log: Log) -> list[float]:
+    """Horizontal error against truth at the start of each degraded interval, m."""
+    ts = deviation_series(r, route, log).truth
+    assert ts is not None
+    return [float(np.interp(a, ts.t, ts.h_err_m)) for a, _ in r.degraded_intervals]
+
+
+def measure() -> dict[str, str]:
+    """Every table, as markdown, by name."""
+    main_rows, wheel_rows, readme_rows = [], [], []
+    ablation: dict[str, dict[str, tuple[float, float]]] = {}
+    entry_lines = []
+    matches = []
+    heading_on = with_values(Params(), {"extensions.heading_observation": True})
+    switches = [f.name for f in dataclasses.fields(ExtensionParams)]
+    for name in SAMPLES:
+        t_start = time.perf_counter()
+        inp = open_inputs(
+            REPO / "sample_logs" / f"{name}.mcap", REPO / "sample_logs" / f"{name}.route.geojson"
+        )
+        log, route, frame = inp.log, inp.route, inp.frame
+        assert route is not None
+        paper_name = PAPER_SCENARIO[name]
+        base = _run(log, route, frame, Params(), "baseline")
+        paper = _run(log, route, frame, Params(), "paper", base)
+        prop = _run(log, route, frame, Params(), "proposed", base)
+        head = _run(log, route, frame, heading_on, "proposed", prop)
+        runs = {"baseline": base, "paper": paper, "proposed": prop, "heading": head}
+        m = {k: _metrics(r, route, log) for k, r in runs.items()}
+        main_rows += [
+            (name, "baseline", m["baseline"]),
+            (name, "paper", m["paper"]),
+            (name, "routefuse", m["proposed"]),
+            (name, "routefuse + heading obs.", m["heading"]),
+        ]
+        readme_rows += [
+            (f"{name} ({paper_name})", "paper, published", _published(paper_name, "Proposed")),
+            (name, "paper, our implementation", m["paper"]),
+            (name, "routefuse", m["proposed"]),
+        ]
+        s, sp = match_summary(prop), match_summary(paper)
+        cells = [f"{x['accepted']} / {x['attempted']}" for x in (sp, s)]
+        matches.append(f"| {name} | {cells[0]} | {cells[1]} |")
+        # no wheel speed
+        nw = dataclasses.replace(log, wheel=None)
+        nw_base = _run(nw, route, frame, Params(), "baseline")
+        nw_prop = _run(nw, route, frame, Params(), "proposed", nw_base)
+        nw_head = _run(nw, route, frame, heading_on, "proposed", nw_prop)
+        wheel_rows += [
+            (name, "baseline, no wheel", _metrics(nw_base, route, nw)),
+            (name, "routefuse, no wheel", _metrics(nw_prop, route, nw)),
+            (name, "routefuse + heading obs., no wheel", _metrics(nw_head, route, nw)),
+        ]
+        # each extension off alone
+        ablation[name] = {}
+        for sw in switches:
+            if sw == "heading_observation":
+                continue
+            p = with_values(Params(), {f"extensions.{sw}": False})
+            r = _run(log, route, frame, p, "proposed", prop)
+            mm = _metrics(r, route, log)
+            assert mm.truth is not None
+            ablation[name][sw] = (mm.truth.rmse_h_err_m or 0.0, mm.route.rmse_pos_dev_m or 0.0)
+        assert m["proposed"].truth is not None
+        ablation[name]["(none off)"] = (
+            m["proposed"].truth.rmse_h_err_m or 0.0,
+            m["proposed"].route.rmse_pos_dev_m or 0.0,
+        )
+        # entry error with and without the fixed-lag re-run (the baseline filter)
+        off = with_values(Params(), {"extensions.portal_rerun": False})
+        b_off = _run(log, route, frame, off, "baseline")
+        on_e, off_e = _entry_errors(base, route, log), _entry_errors(b_off, route, log)
+        for (a, _), e_on, e_off in zip(base.degraded_intervals, on_e, off_e, strict=True):
+            entry_lines.append(f"| {name} | {a - base.t0:.1f} | {e_off:.2f} | {e_on:.2f} |")
+        print(f"{name}: {time.perf_counter() - t_start:.0f} s", file=sys.stderr, flush=True)
+
+    sw_names = [*next(iter(ablation.values()))]
+    head = "| extension switched off | " + " | ".join(SAMPLES) + " |"
+    abl = [head, "|" + "---|" * (len(SAMPLES) + 1)]
+    for sw in sw_names:
+        cells = [f"{ablation[n][sw][0]:.2f} / {ablation[n][sw][1]:.3f}" for n in SAMPLES]
+        abl.append(f"| `{sw}` | " + " | ".join(cells) + " |")
+    return {
+        "methods": format_table(main_rows, style="markdown"),
+        "no-wheel": format_table(wheel_rows, style="markdown"),
+        "ablation": "\n".join(abl),
+        "entry": "\n".join([ENTRY_HEAD, "|---|---|---|---|", *entry_lines]),
+        "matches": "\n".join([MATCH_HEAD, "|---|---|---|", *matches]),
+        "readme": format_table(readme_rows, style="markdown"),
+    }
+
+
+def _replace_block(text: str, name: str, body: str) -> str:
+    begin, end = MARK.format(f"{name} begin"), MARK.format(f"{name} end")
+    pattern = re.compile(re.escape(begin) + r".*?" + re.escape(end), re.S)
+    if not pattern.search(text):
+        raise SystemExit(f"marker {begin!r} not found")
+    return pattern.sub(lambda _: f"{begin}\n{body}\n{end}", text)
+
+
+def main(argv: list[str] | None = None) -> int:
+    parser = argparse.ArgumentParser(description=__doc__.splitlines()[0])
+    parser.add_argument(
+        "--write", action="store_true", help="replace the tables in docs/method.md and README.md"
+    )
+    args = parser.parse_args(argv)
+    tables = measure()
+    for name, body in tables.items():
+        print(f"## {name}\n\n{body}\n")
+    if args.write:
+        doc = REPO / "docs" / "method.md"
+        text = doc.read_text(encoding="utf-8")
+        for name, body in tables.items():
+            if name != "readme":
+                text = _replace_block(text, name, body)
+        doc.write_text(text, encoding="utf-8")
+        readme = REPO / "README.md"
+        readme.write_text(
+            _replace_block(readme.read_text(encoding="utf-8"), "readme", tables["readme"]),
+            encoding="utf-8",
+        )
+    return 0
+
+
+if __name__ == "__main__":
+    raise SystemExit(main())
