@@ -33,6 +33,7 @@ from .matching_kernels import (
     rigid_fit,
     segment_index,
     segment_points,
+    track_chunks,
     unit_interval,
 )
 from .params import Params
@@ -278,10 +279,25 @@ def track_on_route(
         return s, lat
     s_prev = float(project_on_route(route, p[:1])[0][0])
     step = np.r_[0.0, np.hypot(*np.diff(p, axis=0).T)]
-    for i in range(0, n, chunk):
+    reach = np.array([search_m + float(np.sum(step[i : i + chunk])) for i in range(0, n, chunk)])
+    if np.all(np.isfinite(p)) and np.all(np.isfinite(reach)) and search_m >= 0:
+        # compiled: the same projections bit for bit (project_window is Route.project)
+        track_chunks(
+            route.xy,
+            route.s,
+            route._unit,
+            route._seglen,
+            np.ascontiguousarray(p),
+            s_prev,
+            reach,
+            int(chunk),
+            s,
+            lat,
+        )
+        return s, lat
+    for c, i in enumerate(range(0, n, chunk)):
         j = min(i + chunk, n)
-        reach = search_m + float(np.sum(step[i:j]))
-        proj = route.project(p[i:j], np.full(j - i, s_prev), reach)
+        proj = route.project(p[i:j], np.full(j - i, s_prev), float(reach[c]))
         s[i:j], lat[i:j] = proj.s, proj.lateral
         s_prev = float(proj.s[-1])
     return s, lat

@@ -346,3 +346,28 @@ def project_window(
         if abs(lat) < dist - 1e-9:
             lat = np.sign(lat) * dist
         lat_out[p] = lat
+
+
+@njit(cache=True)
+def track_chunks(
+    xy: F64,
+    rs: F64,
+    unit: F64,
+    seglen: F64,
+    pts: F64,
+    s_first: float,
+    reach: F64,
+    chunk: int,
+    s_out: F64,
+    lat_out: F64,
+) -> None:
+    """The loop of :func:`estimator.matching.track_on_route`: chunk ``c`` of ``chunk`` points is
+    projected within ``reach[c]`` of where the previous chunk ended (:func:`project_window`)."""
+    n = pts.shape[0]
+    s_prev = s_first
+    for c in range(reach.shape[0]):
+        i = c * chunk
+        j = min(i + chunk, n)
+        guess = np.full(j - i, s_prev)
+        project_window(xy, rs, unit, seglen, pts[i:j], guess, reach[c], s_out[i:j], lat_out[i:j])
+        s_prev = s_out[j - 1]

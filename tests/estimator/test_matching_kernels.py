@@ -344,6 +344,38 @@ def test_segment_tangent_and_projection_are_the_route_methods(seed):
     np.testing.assert_array_equal(one[0], route.project(pts[0], 10.0, 60.0).s)
 
 
+def ref_track_on_route(route, xy, *, search_m=50.0, chunk=64):
+    p = np.atleast_2d(np.asarray(xy, np.float64))[:, :2]
+    n = len(p)
+    s, lat = np.empty(n), np.empty(n)
+    s_prev = float(matching.project_on_route(route, p[:1])[0][0])
+    step = np.r_[0.0, np.hypot(*np.diff(p, axis=0).T)]
+    for i in range(0, n, chunk):
+        j = min(i + chunk, n)
+        reach = search_m + float(np.sum(step[i:j]))
+        proj = route.project(p[i:j], np.full(j - i, s_prev), reach)
+        s[i:j], lat[i:j] = proj.s, proj.lateral
+        s_prev = float(proj.s[-1])
+    return s, lat
+
+
+@pytest.mark.parametrize("seed", range(8))
+def test_track_on_route_is_the_chunked_route_projection(seed):
+    rng = np.random.default_rng(seed)
+    route = Route(_random_polyline(rng, 200))
+    s_true = np.sort(rng.uniform(0, route.length, 3000))
+    xy = route.point_at(s_true) + rng.normal(0, 3.0, (3000, 2))
+    for chunk in (1, 7, 64):
+        got = matching.track_on_route(route, xy, chunk=chunk)
+        want = ref_track_on_route(route, xy, chunk=chunk)
+        np.testing.assert_array_equal(got[0], want[0])
+        np.testing.assert_array_equal(got[1], want[1])
+    xy[100] = np.nan  # the numpy path
+    got = matching.track_on_route(route, xy)
+    want = ref_track_on_route(route, xy)
+    np.testing.assert_array_equal(got[0], want[0])
+
+
 # ---------------------------------------------------------------------------------------------
 # end to end
 
