@@ -409,3 +409,37 @@ def test_a_gate_change_refits_no_attempt_before_the_first_changed_outcome(
     else:
         # live again from the first changed attempt on (long windows may add fits)
         assert 0 < len(fits) <= 2 * (len(fresh.matches) - changed[0])
+
+
+def test_max_turn_is_the_largest_heading_change_over_a_stretch():
+    from estimator.runner import _max_turn_deg
+
+    s = np.linspace(0.0, 1000.0, 401)
+    straight = np.column_stack([s, np.zeros_like(s)])
+    assert _max_turn_deg(straight, 250.0, 5.0) == pytest.approx(0.0, abs=1e-9)
+    # 300 m straight, a 30 deg arc of R 500 m (262 m), then straight: 250 m see 28.6 deg at most
+    radius, turn = 500.0, np.radians(30.0)
+    a = np.linspace(0.0, turn, 200)
+    arc = np.column_stack([300.0 + radius * np.sin(a), radius * (1 - np.cos(a))])
+    end = arc[-1] + np.outer(np.linspace(0.0, 300.0, 100), [np.cos(turn), np.sin(turn)])
+    bend = np.vstack([straight[:121], arc[1:], end[1:]])
+    assert _max_turn_deg(bend, 250.0, 5.0) == pytest.approx(np.degrees(250.0 / radius), abs=1.0)
+    assert _max_turn_deg(bend, 1000.0, 5.0) == pytest.approx(30.0, abs=1.0)
+
+
+def test_a_match_that_does_not_observe_along_track_updates_cross_track_only():
+    from estimator.runner import UNOBSERVED_VAR, _applied_obs_cov
+
+    tangent = np.array([np.cos(0.3), np.sin(0.3)])
+    normal = np.array([-tangent[1], tangent[0]])
+    basis = np.column_stack([tangent, normal])
+    cov = basis @ np.diag([100.0**2, 1.0]) @ basis.T
+    rec = dataclasses.make_dataclass("Rec", ["obs_cov", "extra"])(cov, {"along_observed": 0.0})
+    applied = _applied_obs_cov(rec, Params())
+    assert tangent @ applied @ tangent == pytest.approx(UNOBSERVED_VAR)
+    assert normal @ applied @ normal == pytest.approx(1.0)
+    assert tangent @ applied @ normal == pytest.approx(0.0, abs=1e-6)
+    observed = dataclasses.replace(rec, extra={"along_observed": 1.0})
+    assert np.array_equal(_applied_obs_cov(observed, Params()), cov)
+    paper = with_values(Params(), {"extensions.geometry_covariance": False})
+    assert np.array_equal(_applied_obs_cov(rec, paper), cov)
