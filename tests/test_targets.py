@@ -153,7 +153,7 @@ def test_along_track_error_is_at_most_a_thousandth_of_each_outage(samples, name)
 
 
 @pytest.mark.slow
-@pytest.mark.parametrize("name", ["long_tunnel", "spiral_tunnel"])
+@pytest.mark.parametrize("name", NAMES)
 @pytest.mark.parametrize("wrong", ["shifted 25 m", "reversed"])
 def test_a_wrong_route_is_never_accepted(samples, name, wrong) -> None:
     """A parallel road 25 m away and the route driven backwards: every match rejected with the
