@@ -38,8 +38,11 @@ SEED = 0
 LOGS: dict[str, str] = {"10min": "long_drive_10min", "60min": "long_drive_60min"}
 """bench log key -> simulator scenario"""
 
-MATCHING_CHANGE = ("gates.max_residual_m", 2.0)
-"""a gate slider moved (then moved back to the default: each request is a change)"""
+MATCHING_CHANGE = ("gates.max_residual_m", 0.1)
+"""a gate slider moved (then back to the default: each request is a change); on the bench logs
+it rejects attempts from late in the drive on (the figures say where: first_changed)"""
+EARLY_CHANGE = ("gates.max_correction_m", 2.0)
+"""a gate change that rejects attempts from the first tunnel on: nearly a whole re-run"""
 WINDOW_CHANGE = ("window.length_m", 300.0)
 """a window-length change: every match attempt's inputs change"""
 NOISE_CHANGE = ("noise.gyro_arw_deg_sqrt_h", 0.2)
@@ -100,6 +103,12 @@ ITEMS: tuple[Item, ...] = (
         f"inspector: {MATCHING_CHANGE[0]} changed -> new session (both runs, views)",
         ("10min", "60min"),
         {"10min": _t("cpu_s", "<=", 0.5, "<= 0.5 s"), "60min": _t("cpu_s", "<=", 2.0, "<= 2 s")},
+    ),
+    Item(
+        "rerun_early",
+        f"inspector: {EARLY_CHANGE[0]} changed -> new session (changes the first tunnel)",
+        ("10min", "60min"),
+        {},
     ),
     Item(
         "rerun_window",
@@ -340,11 +349,15 @@ def _measure_rerun(paths: BenchLog, repeat: int, change: tuple[str, float]) -> F
         raise ValueError(f"{name}: the changed value {changed} is the current value")
     clock = _Clock.new()
     stages: dict[str, list[float]] = {}
+    first_changed = []
+    before = controller.session
     # the first change warms up what a first re-run compiles or caches: not counted
     for i in range(repeat + 1):
         value = values[i % len(values)]
         with clock.lap():
             session = waiter(lambda v=value: controller.set_param(name, v))
+        first_changed.append(_first_changed(before.proposed.matches, session.proposed.matches))
+        before = session
         if i == 0:
             clock.wall.pop(0)
             clock.cpu.pop(0)
@@ -354,12 +367,30 @@ def _measure_rerun(paths: BenchLog, repeat: int, change: tuple[str, float]) -> F
     controller.close()
     figs = clock.figures()
     figs.update({k: min(v) for k, v in stages.items()})
-    figs["attempts"] = float(len(session.proposed.matches))
+    n = len(session.proposed.matches)
+    figs["attempts"] = float(n)
+    figs["first_changed"] = float(min(first_changed))
+    figs["first_changed_fraction"] = min(first_changed) / max(n, 1)
     return figs
+
+
+def _first_changed(old: Sequence[Any], new: Sequence[Any]) -> int:
+    """Index of the first attempt whose outcome differs (verdict, or the pseudo-position an
+    accepted match applied); the length of the shorter list when none does."""
+    for i, (a, b) in enumerate(zip(old, new, strict=False)):
+        if a.accepted != b.accepted or a.t != b.t:
+            return i
+        if a.accepted and not np.array_equal(a.pseudo_position, b.pseudo_position):
+            return i
+    return min(len(old), len(new))
 
 
 def measure_rerun_matching(paths: BenchLog, repeat: int) -> Figures:
     return _measure_rerun(paths, repeat, MATCHING_CHANGE)
+
+
+def measure_rerun_early(paths: BenchLog, repeat: int) -> Figures:
+    return _measure_rerun(paths, repeat, EARLY_CHANGE)
 
 
 def measure_rerun_window(paths: BenchLog, repeat: int) -> Figures:
@@ -464,6 +495,7 @@ MEASURES: dict[str, Callable[[BenchLog, int], Figures]] = {
     "baseline": measure_baseline,
     "proposed": measure_proposed,
     "rerun_matching": measure_rerun_matching,
+    "rerun_early": measure_rerun_early,
     "rerun_window": measure_rerun_window,
     "rerun_noise": measure_rerun_noise,
     "inspector": measure_inspector,
@@ -652,11 +684,19 @@ _SHOWN: dict[str, tuple[tuple[str, str, str], ...]] = {
         ("wall_s", "wall s", "{:.3f}"),
         ("proposed_s", "proposed s", "{:.3f}"),
         ("views_s", "views s", "{:.3f}"),
+        ("first_changed_fraction", "first changed at", "{:.0%}"),
+    ),
+    "rerun_early": (
+        ("cpu_s", "cpu s", "{:.3f}"),
+        ("wall_s", "wall s", "{:.3f}"),
+        ("proposed_s", "proposed s", "{:.3f}"),
+        ("first_changed_fraction", "first changed at", "{:.0%}"),
     ),
     "rerun_window": (
         ("cpu_s", "cpu s", "{:.3f}"),
         ("wall_s", "wall s", "{:.3f}"),
         ("proposed_s", "proposed s", "{:.3f}"),
+        ("first_changed_fraction", "first changed at", "{:.0%}"),
     ),
     "rerun_noise": (
         ("cpu_s", "cpu s", "{:.3f}"),

@@ -18,6 +18,7 @@ def test_select_by_name_and_prefix():
     assert [i.name for i in select_items(["proposed", "export"])] == ["proposed", "export"]
     assert {i.name for i in select_items(["rerun"])} == {
         "rerun_matching",
+        "rerun_early",
         "rerun_window",
         "rerun_noise",
     }
