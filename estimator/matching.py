@@ -17,6 +17,7 @@ Every intermediate and every gate goes into a :class:`~estimator.results.MatchRe
 
 from __future__ import annotations
 
+import functools
 from dataclasses import dataclass
 from typing import Literal
 
@@ -31,6 +32,7 @@ from .matching_kernels import (
     polyline_arrays,
     project_window,
     rigid_fit,
+    rival_score,
     segment_index,
     segment_points,
     track_chunks,
@@ -549,13 +551,7 @@ def _fit(
     po = params.pseudo
     step = params.window.along_search_step_m
     half = params.window.along_search_m
-    if ext.along_track_search:
-        k_half = max(int(np.ceil(half / step)), 1)
-        deltas = step * np.arange(-k_half, k_half + 1, dtype=np.float64)
-    elif ext.geometry_covariance:
-        deltas = np.array([-step, 0.0, step])
-    else:
-        deltas = np.zeros(1)
+    deltas = _deltas(ext.along_track_search, ext.geometry_covariance, half, step)
     ms, m = _scan(win, route, s_anchor, deltas, h)
 
     offset, curvature, sigma = 0.0, 0.0, float("inf")
@@ -717,34 +713,98 @@ def _piece(
     return piece
 
 
-def _rivals(
+RIVALS = ("left", "right", "reversed")
+
+
+def _rival_pieces(
+    win: F64, route: Route, s_anchor: float, lane: float, lane_path: bool, params: Params
+) -> tuple[tuple[str, float, float, float, bool], ...]:
+    """(name, lateral shift, lo, hi, reversed) of the route pieces the rivals are fitted to:
+    the route shifted left and right, and driven backwards."""
+    h = params.window.spacing_m
+    span = (len(win) - 1) * h
+    pad = params.window.along_search_m + 2.0 * h
+    shift = params.gates.alternative_shift_m
+    base = lane if lane_path else 0.0
+    return (
+        ("left", base + shift, s_anchor - pad, s_anchor + span + pad, False),
+        ("right", base - shift, s_anchor - pad, s_anchor + span + pad, False),
+        # driven the other way, the lane lies on the other side of the centreline
+        ("reversed", -base, s_anchor - span - pad, s_anchor + pad, True),
+    )
+
+
+@functools.lru_cache(maxsize=64)
+def _deltas(along_track_search: bool, geometry_covariance: bool, half: float, step: float) -> F64:
+    """The along-track offsets :func:`_fit` scans."""
+    if along_track_search:
+        k_half = max(int(np.ceil(half / step)), 1)
+        out = step * np.arange(-k_half, k_half + 1, dtype=np.float64)
+    elif geometry_covariance:
+        out = np.array([-step, 0.0, step])
+    else:
+        out = np.zeros(1)
+    out.setflags(write=False)
+    return out
+
+
+def _rival_scores(
     win: F64,
     p_dr: F64,
+    cov: F64,
     route: Route,
     s_anchor: float,
     lane: float,
     lane_path: bool,
     params: Params,
-) -> dict[str, _Fit | None]:
-    """The same window registered to the route shifted left, right, and driven backwards."""
-    h = params.window.spacing_m
-    span = (len(win) - 1) * h
-    pad = params.window.along_search_m + 2.0 * h
-    shift = params.gates.alternative_shift_m
-    base, z_lane = (lane, 0.0) if lane_path else (0.0, lane)
-    pieces = {
-        "left": _piece(route, base + shift, s_anchor - pad, s_anchor + span + pad),
-        "right": _piece(route, base - shift, s_anchor - pad, s_anchor + span + pad),
-        # driven the other way, the lane lies on the other side of the centreline
-        "reversed": _piece(route, -base, s_anchor - span - pad, s_anchor + pad, reverse=True),
-    }
-    out: dict[str, _Fit | None] = {}
-    for name, piece in pieces.items():
-        if piece is None:
-            out[name] = None
-            continue
-        out[name] = _fit(win, p_dr, piece, _anchor(piece, win[0]), z_lane, params, exact=False)
-    return out
+) -> tuple[tuple[str, tuple[float, float, float, float], float, float], ...]:
+    """(name, shape-gate values, cost, residual) of each rival that can be fitted: what
+    :func:`_fit` (``exact=False``) and :func:`_rival_cost` give on each :func:`_rival_pieces`
+    piece, to rounding, in one compiled call per rival (they are scored, never applied)."""
+    ext, w, po = params.extensions, params.window, params.pseudo
+    deltas = _deltas(
+        ext.along_track_search, ext.geometry_covariance, w.along_search_m, w.along_search_step_m
+    )
+    cfg = np.array(
+        [
+            w.spacing_m,
+            w.along_search_step_m,
+            float(ext.along_track_search),
+            float(ext.geometry_covariance),
+            po.shape_noise_m,
+            po.along_sigma_max_m,
+            po.along_sigma_min_m,
+            po.cross_sigma_m,
+            po.sigma_m,
+        ]
+    )
+    z_lane = 0.0 if lane_path else lane
+    w_c = np.ascontiguousarray(win, np.float64)
+    out = np.empty(5)
+    scores = []
+    for name, lateral, lo, hi, reverse in _rival_pieces(
+        win, route, s_anchor, lane, lane_path, params
+    ):
+        if rival_score(
+            w_c,
+            p_dr,
+            cov,
+            route.xy,
+            route.s,
+            route._unit,
+            float(lateral),
+            float(lo),
+            float(hi),
+            reverse,
+            float(z_lane),
+            deltas,
+            len(deltas) // 2,
+            cfg,
+            out,
+        ):
+            shape = (int(out[0]), float(out[1]), float(out[2]), float(out[3]))
+            scores.append((name, shape, float(out[4]), float(out[2])))
+    return tuple(scores)
 
 
 def _check_inputs(
@@ -782,8 +842,8 @@ class MatchGeometry:
     fit: _Fit | None
     route_s: tuple[float, float]
     route_segment: F64
-    rivals: dict[str, _Fit | None] | None
-    """None when ``extensions.candidate_validation`` is off"""
+    validated: bool
+    """``extensions.candidate_validation``: the rivals were scored"""
     scores: _Scores | None = None
     """the values the gates test (None without a fit)"""
 
@@ -889,7 +949,7 @@ def match_geometry(
             fit=None,
             route_s=(s_anchor, s_anchor),
             route_segment=np.empty((0, 2)),
-            rivals=None,
+            validated=False,
         )
     if lane_path:
         ends = fit.route_points[np.flatnonzero(fit.valid)[[0, -1]]] - lane * fit.normal
@@ -899,11 +959,6 @@ def match_geometry(
         s0, s1 = float(route_s[0]), float(route_s[1])
     else:
         s0, s1 = fit.s_first, fit.s_first + (fit.n_pairs - 1) * h
-    rivals = (
-        _rivals(win, p, route, s_anchor, lane, lane_path, params)
-        if ext.candidate_validation
-        else None
-    )
     nu = fit.z - p
     extra: dict[str, float] = {
         "anchor_s": s_anchor,
@@ -920,19 +975,18 @@ def match_geometry(
     }
     d2 = jump = cost = float("nan")
     rival_scores: list[tuple[str, tuple[float, float, float, float], float]] = []
-    if rivals is not None:
+    if ext.candidate_validation:
         d2 = _mahalanobis2(nu, cov + fit.obs_cov)
         extra["mahalanobis_d2"] = d2
         jump = abs(float(nu @ fit.normal))
         cost = _rival_cost(fit, p, cov, params)
         extra["cost"] = cost
-        for name, rival in rivals.items():
-            if rival is None:
-                continue
-            rival_cost = _rival_cost(rival, p, cov, params)
+        for name, shape, rival_cost, rival_residual in _rival_scores(
+            win, p, cov, route, s_anchor, lane, lane_path, params
+        ):
             extra[f"cost_{name}"] = rival_cost
-            extra[f"residual_{name}_m"] = rival.residual
-            rival_scores.append((name, _shape_values(rival), rival_cost))
+            extra[f"residual_{name}_m"] = rival_residual
+            rival_scores.append((name, shape, rival_cost))
     scores = _Scores(
         nu=nu,
         p_ref=fit.z - lane * fit.normal,
@@ -955,7 +1009,7 @@ def match_geometry(
         fit=fit,
         route_s=(s0, s1),
         route_segment=_segment_of(route, s0, s1),
-        rivals=rivals,
+        validated=ext.candidate_validation,
         scores=scores,
     )
 
@@ -1009,7 +1063,7 @@ def judge_match(
     nu, p_ref = sc.nu, sc.p_ref
     s0, s1 = geometry.route_s
     extra = dict(sc.extra)
-    if geometry.rivals is not None:
+    if geometry.validated:
         g = params.gates
         gates.append(
             _gate(

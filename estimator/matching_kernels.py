@@ -371,3 +371,301 @@ def track_chunks(
         guess = np.full(j - i, s_prev)
         project_window(xy, rs, unit, seglen, pts[i:j], guess, reach[c], s_out[i:j], lat_out[i:j])
         s_prev = s_out[j - 1]
+
+
+# ---------------------------------------------------------------------------------------------
+# the rivals: scored only, computed to rounding in one compiled call
+
+
+@njit(cache=True)
+def _nearest_arc(rxy: F64, rs: F64, x: float, y: float) -> float:
+    """Arc length of the point of a polyline nearest to (x, y) (matching._nearest_s)."""
+    best, best_s = np.inf, 0.0
+    for j in range(rxy.shape[0] - 1):
+        dx = rxy[j + 1, 0] - rxy[j, 0]
+        dy = rxy[j + 1, 1] - rxy[j, 1]
+        seg = rs[j + 1] - rs[j]
+        f = ((x - rxy[j, 0]) * dx + (y - rxy[j, 1]) * dy) / (seg * seg)
+        f = min(max(f, 0.0), 1.0)
+        ex = rxy[j, 0] + f * dx - x
+        ey = rxy[j, 1] + f * dy - y
+        d = ex * ex + ey * ey
+        if d < best:
+            best, best_s = d, rs[j] + f * seg
+    return best_s
+
+
+@njit(cache=True)
+def _scan_grid(
+    win: F64,
+    rxy: F64,
+    rs: F64,
+    runit: F64,
+    s0: float,
+    step: float,
+    k_n: int,
+    ratio: int,
+    ms: F64,
+    m: F64,
+) -> None:
+    """The along-track scan (matching._scan_kernel) when the window spacing is ``ratio`` grid
+    steps: every pair lies on the grid s0 + step * g, so each route point is interpolated once
+    instead of once per offset. Equal to the direct scan to rounding."""
+    n = win.shape[0]
+    nseg = rxy.shape[0] - 1
+    length = rs[nseg]
+    n_grid = k_n + ratio * (n - 1)
+    gx = np.empty(n_grid)
+    gy = np.empty(n_grid)
+    ok = np.empty(n_grid, np.bool_)
+    ox, oy = win[0, 0], win[0, 1]
+    j = segment_index(rs, s0)
+    for g in range(n_grid):
+        s = s0 + step * g
+        ok[g] = s >= -1e-6 and s <= length + 1e-6
+        while j < nseg - 1 and rs[j + 1] <= s:
+            j += 1
+        f = (s - rs[j]) / (rs[j + 1] - rs[j])
+        gx[g] = rxy[j, 0] + f * (rxy[j + 1, 0] - rxy[j, 0]) - ox
+        gy[g] = rxy[j, 1] + f * (rxy[j + 1, 1] - rxy[j, 1]) - oy
+    for k in range(k_n):
+        sw = 0.0
+        sax = say = sbx = sby = 0.0
+        saa = sbb = c00 = c01 = c10 = c11 = 0.0
+        for i in range(n):
+            g = k + ratio * i
+            if not ok[g]:
+                continue
+            qx, qy = gx[g], gy[g]
+            px = win[i, 0] - ox
+            py = win[i, 1] - oy
+            sw += 1.0
+            sax += px
+            say += py
+            sbx += qx
+            sby += qy
+            saa += px * px + py * py
+            sbb += qx * qx + qy * qy
+            c00 += px * qx
+            c01 += px * qy
+            c10 += py * qx
+            c11 += py * qy
+        m[k] = sw
+        if sw < 3:
+            ms[k] = np.inf
+            continue
+        ax, ay, bx, by = sax / sw, say / sw, sbx / sw, sby / sw
+        saa -= sw * (ax * ax + ay * ay)
+        sbb -= sw * (bx * bx + by * by)
+        c00 -= sw * ax * bx
+        c01 -= sw * ax * by
+        c10 -= sw * ay * bx
+        c11 -= sw * ay * by
+        tr = np.hypot(c00 + c11, c01 - c10)
+        ms[k] = max(saa + sbb - 2.0 * tr, 0.0) / sw
+
+
+@njit(cache=True)
+def rival_score(
+    win: F64,
+    p_dr: F64,
+    cov: F64,
+    xy: F64,
+    rs: F64,
+    unit: F64,
+    lateral: float,
+    lo: float,
+    hi: float,
+    reverse: bool,
+    lane_offset: float,
+    deltas: F64,
+    k_center: int,
+    cfg: F64,
+    out: F64,
+) -> bool:
+    """One rival of a match attempt, as matching._rivals + _fit + _rival_cost compute it (to
+    rounding): the route between ``lo`` and ``hi``, shifted ``lateral`` (maybe reversed),
+    registered to the window. False when no rival can be built or fitted (matching: None);
+    else ``out`` = (n_pairs, heading cosine, residual, |rotation| in degrees, cost).
+
+    ``cfg`` = (spacing, along step, along_track_search, geometry_covariance, shape_noise,
+    along_sigma_max, along_sigma_min, cross_sigma, sigma_m); ``k_center``: the offset index
+    used without the along-track search."""
+    h, step = cfg[0], cfg[1]
+    along_search = cfg[2] > 0.0
+    geometry_cov = cfg[3] > 0.0
+    shape_noise, sig_max, sig_min, cross_sigma, sigma_m = cfg[4], cfg[5], cfg[6], cfg[7], cfg[8]
+    # --- the piece (matching._piece)
+    length = rs[rs.shape[0] - 1]
+    lo = max(lo, 0.0)
+    hi = min(hi, length)
+    if hi - lo <= 1e-3:
+        return False
+    seg = segment_points(xy, rs, unit, lo, hi)
+    if lateral != 0.0:
+        seg = offset_polyline(seg, lateral)
+        if seg.shape[0] == 0:
+            return False
+    pxy, _, punit, ps = polyline_arrays(seg)
+    if pxy.shape[0] < 2:
+        return False
+    if reverse:
+        pxy, _, punit, ps = polyline_arrays(pxy[::-1].copy())
+        if pxy.shape[0] < 2:
+            return False
+    for i in range(pxy.shape[0]):
+        if not (np.isfinite(pxy[i, 0]) and np.isfinite(pxy[i, 1])):
+            return False
+    s_anchor = _nearest_arc(pxy, ps, win[0, 0], win[0, 1])
+    # --- the along-track scan and its interval (matching._fit)
+    nd = deltas.shape[0]
+    ms = np.empty(nd)
+    m = np.empty(nd)
+    ratio = int(np.rint(h / step))
+    grid = (
+        along_search
+        and nd > 1
+        and ratio >= 1
+        and abs(ratio * step - h) <= 1e-12 * h
+        and abs(deltas[1] - deltas[0] - step) <= 1e-12 * step
+    )
+    if grid:
+        _scan_grid(win, pxy, ps, punit, s_anchor + deltas[0], step, nd, ratio, ms, m)
+    else:
+        _scan_direct(win, pxy, ps, s_anchor, deltas, h, ms, m)
+    offset, curvature, sigma = 0.0, 0.0, np.inf
+    k = k_center
+    if along_search:
+        k = 0
+        for i in range(1, nd):
+            if ms[i] < ms[k]:
+                k = i
+    if 0 < k < nd - 1 and np.isfinite(ms[k - 1]) and np.isfinite(ms[k]) and np.isfinite(ms[k + 1]):
+        jm, j0, jp = ms[k - 1], ms[k], ms[k + 1]
+        curvature = (jm - 2.0 * j0 + jp) / step**2
+        noise2 = max(j0 / 2.0, shape_noise**2)
+        if along_search:
+            chi = np.empty(nd)
+            w = max(m[k], 1.0)
+            for i in range(nd):
+                chi[i] = w * (ms[i] - j0) / noise2
+            found, b0, b1 = unit_interval(deltas, chi, k)
+            if found:
+                sigma = 0.5 * (b1 - b0)
+                if curvature > 0:
+                    offset = deltas[k] + 0.5 * step * (jm - jp) / (jm - 2.0 * j0 + jp)
+                offset = min(max(offset if curvature > 0 else deltas[k], b0), b1)
+        elif curvature > 0:
+            sigma = np.sqrt(2.0 * noise2 / (max(m[k], 1.0) * curvature))
+    observed = sigma < sig_max
+    if not observed:
+        offset = 0.0
+    sigma = max(sigma, sig_min) if observed else sig_max
+    # --- the pairs and the fit
+    n = win.shape[0]
+    s = np.empty(n)
+    valid = np.empty(n, np.bool_)
+    q = np.empty((n, 2))
+    pair_points(win, pxy, ps, punit, s_anchor + offset, h, s, valid, q)
+    rot = np.empty((2, 2))
+    trans = np.empty(2)
+    residual = rigid_fit(win, q, valid, rot, trans)
+    n_pairs = 0
+    i1 = i0 = -1
+    for i in range(n):
+        if valid[i]:
+            n_pairs += 1
+            i0, i1 = i1, i
+    if n_pairs < 2:
+        return False
+    dsx, dsy = win[i1, 0] - win[i0, 0], win[i1, 1] - win[i0, 1]
+    dtx, dty = q[i1, 0] - q[i0, 0], q[i1, 1] - q[i0, 1]
+    norm = np.hypot(dsx, dsy) * np.hypot(dtx, dty)
+    heading_cos = (dsx * dtx + dsy * dty) / norm if norm > 0 else -1.0
+    prx = rot[0, 0] * p_dr[0] + rot[0, 1] * p_dr[1] + trans[0]
+    pry = rot[1, 0] * p_dr[0] + rot[1, 1] * p_dr[1] + trans[1]
+    s_end = s[i1]
+    t_end = punit[segment_index(ps, s_end)]
+    s_ref = s_end + (prx - q[i1, 0]) * t_end[0] + (pry - q[i1, 1]) * t_end[1]
+    t = punit[segment_index(ps, s_ref)]
+    nx, ny = -t[1], t[0]
+    zx = prx + lane_offset * nx
+    zy = pry + lane_offset * ny
+    if geometry_cov:
+        cross = max(cross_sigma, residual)
+        a, b = sigma**2, cross**2
+        r00 = t[0] * t[0] * a + nx * nx * b
+        r01 = t[0] * t[1] * a + nx * ny * b
+        r11 = t[1] * t[1] * a + ny * ny * b
+    else:
+        r00 = r11 = sigma_m**2
+        r01 = 0.0
+    # --- its cost (matching._rival_cost)
+    s00 = cov[0, 0] + r00
+    s01 = cov[0, 1] + r01
+    s10 = cov[1, 0] + r01
+    s11 = cov[1, 1] + r11
+    det = s00 * s11 - s01 * s10
+    nux, nuy = zx - p_dr[0], zy - p_dr[1]
+    d2 = (
+        np.inf
+        if det == 0.0
+        else (nux * (s11 * nux - s01 * nuy) + nuy * (s00 * nuy - s10 * nux)) / det
+    )
+    out[0] = n_pairs
+    out[1] = heading_cos
+    out[2] = residual
+    out[3] = np.degrees(abs(np.arctan2(rot[1, 0], rot[0, 0])))
+    out[4] = d2 + (residual / shape_noise) ** 2
+    return True
+
+
+@njit(cache=True)
+def _scan_direct(
+    win: F64, rxy: F64, rs: F64, s_anchor: float, deltas: F64, spacing: float, ms: F64, m: F64
+) -> None:
+    """matching._scan_kernel (a copy: that one stays the filter's bit-for-bit reference)."""
+    n = win.shape[0]
+    nseg = rxy.shape[0] - 1
+    length = rs[nseg]
+    ox, oy = win[0, 0], win[0, 1]
+    for k in range(deltas.shape[0]):
+        sw = 0.0
+        sax = say = sbx = sby = 0.0
+        saa = sbb = c00 = c01 = c10 = c11 = 0.0
+        j = segment_index(rs, s_anchor + deltas[k])
+        for i in range(n):
+            s = s_anchor + deltas[k] + spacing * i
+            if s < -1e-6 or s > length + 1e-6:
+                continue
+            while j < nseg - 1 and rs[j + 1] <= s:
+                j += 1
+            f = (s - rs[j]) / (rs[j + 1] - rs[j])
+            qx = rxy[j, 0] + f * (rxy[j + 1, 0] - rxy[j, 0]) - ox
+            qy = rxy[j, 1] + f * (rxy[j + 1, 1] - rxy[j, 1]) - oy
+            px = win[i, 0] - ox
+            py = win[i, 1] - oy
+            sw += 1.0
+            sax += px
+            say += py
+            sbx += qx
+            sby += qy
+            saa += px * px + py * py
+            sbb += qx * qx + qy * qy
+            c00 += px * qx
+            c01 += px * qy
+            c10 += py * qx
+            c11 += py * qy
+        m[k] = sw
+        if sw < 3:
+            ms[k] = np.inf
+            continue
+        ax, ay, bx, by = sax / sw, say / sw, sbx / sw, sby / sw
+        saa -= sw * (ax * ax + ay * ay)
+        sbb -= sw * (bx * bx + by * by)
+        c00 -= sw * ax * bx
+        c01 -= sw * ax * by
+        c10 -= sw * ay * bx
+        c11 -= sw * ay * by
+        tr = np.hypot(c00 + c11, c01 - c10)
+        ms[k] = max(saa + sbb - 2.0 * tr, 0.0) / sw

@@ -376,6 +376,66 @@ def test_track_on_route_is_the_chunked_route_projection(seed):
     np.testing.assert_array_equal(got[0], want[0])
 
 
+def ref_rival_scores(win, p_dr, cov, route, s_anchor, lane, lane_path, params):
+    """The rivals as the Python matcher computes them: _piece, _anchor, _fit, _rival_cost."""
+    z_lane = 0.0 if lane_path else lane
+    out = []
+    pieces = matching._rival_pieces(win, route, s_anchor, lane, lane_path, params)
+    for name, lateral, lo, hi, reverse in pieces:
+        piece = matching._piece(route, lateral, lo, hi, reverse=reverse)
+        if piece is None:
+            continue
+        anchor = matching._anchor(piece, win[0])
+        fit = matching._fit(win, p_dr, piece, anchor, z_lane, params, exact=False)
+        if fit is None:
+            continue
+        cost = matching._rival_cost(fit, p_dr, cov, params)
+        out.append((name, matching._shape_values(fit), cost, fit.residual))
+    return tuple(out)
+
+
+RIVAL_PARAMS = [
+    {},
+    {"extensions.along_track_search": False},
+    {"extensions.along_track_search": False, "extensions.geometry_covariance": False},
+    {"window.spacing_m": 3.5, "window.along_search_step_m": 0.7},  # the direct scan
+    {"window.spacing_m": 4.0, "window.along_search_step_m": 1.5},
+    {"gates.alternative_shift_m": 4.0, "pseudo.shape_noise_m": 0.3},
+]
+
+
+@pytest.mark.parametrize("seed", range(12))
+@pytest.mark.parametrize("change", RIVAL_PARAMS)
+def test_compiled_rivals_are_the_python_rivals(seed, change):
+    from estimator.params import with_values
+
+    rng = np.random.default_rng(seed)
+    params = with_values(Params(), change)
+    route = Route(_random_polyline(rng, 120))
+    h = params.window.spacing_m
+    s0 = float(rng.uniform(-20.0, route.length - 100.0))
+    n = int(rng.integers(3, 60))
+    q = route.point_at(s0 + h * np.arange(n))
+    angle = rng.uniform(-0.05, 0.05)
+    rot = np.array([[np.cos(angle), -np.sin(angle)], [np.sin(angle), np.cos(angle)]])
+    win = (q - q.mean(0)) @ rot.T + q.mean(0) + rng.normal(0, rng.choice([0.01, 0.5]), q.shape)
+    p_dr = win[-1] + rng.normal(0, 2.0, 2)
+    a = rng.normal(size=(2, 2))
+    cov = a @ a.T + np.eye(2)
+    s_anchor = float(matching.project_on_route(route, win[0])[0][0])
+    lane = float(rng.choice([0.0, 1.8, -3.1]))
+    for lane_path in (False, True):
+        got = matching._rival_scores(win, p_dr, cov, route, s_anchor, lane, lane_path, params)
+        want = ref_rival_scores(win, p_dr, cov, route, s_anchor, lane, lane_path, params)
+        assert [r[0] for r in got] == [r[0] for r in want]
+        for g, w in zip(got, want, strict=True):
+            assert g[1][0] == w[1][0]  # pairs
+            _close(g[1][1], w[1][1], "heading cos")
+            _close(g[1][2], w[1][2], "residual", squared=True)
+            _close(g[1][3], w[1][3], "rotation")
+            _close(g[2], w[2], "cost")
+
+
 # ---------------------------------------------------------------------------------------------
 # end to end
 
