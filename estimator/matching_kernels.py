@@ -483,7 +483,7 @@ def rival_score(
     cfg: F64,
     out: F64,
 ) -> bool:
-    """One rival of a match attempt, as matching._rivals + _fit + _rival_cost compute it (to
+    """One rival of a match attempt, as matching._piece, _fit and _rival_cost compute it (to
     rounding): the route between ``lo`` and ``hi``, shifted ``lateral`` (maybe reversed),
     registered to the window. False when no rival can be built or fitted (matching: None);
     else ``out`` = (n_pairs, heading cosine, residual, |rotation| in degrees, cost).
