@@ -21,12 +21,22 @@ def add_param_options(parser: argparse.ArgumentParser) -> None:
         "precedence: defaults < --config FILE < --set NAME=VALUE < the per-parameter flags",
     )
     g.add_argument("--config", metavar="FILE.toml", help="parameters from a TOML file")
-    g.add_argument("--set", metavar="NAME=VALUE", action="append", default=[],
-                   help="set a parameter by dotted name, e.g. gates.max_residual_m=2.5")
+    g.add_argument(
+        "--set",
+        metavar="NAME=VALUE",
+        action="append",
+        default=[],
+        help="set a parameter by dotted name, e.g. gates.max_residual_m=2.5",
+    )
     for spec in param_specs():
         unit = f" [{spec.unit}]" if spec.unit else ""
-        g.add_argument(_flag(spec.name), dest=f"param:{spec.name}", metavar="V", default=None,
-                       help=f"{spec.doc}{unit} (default {spec.default})".replace("%", "%%"))
+        g.add_argument(
+            _flag(spec.name),
+            dest=f"param:{spec.name}",
+            metavar="V",
+            default=None,
+            help=f"{spec.doc}{unit} (default {spec.default})".replace("%", "%%"),
+        )
 
 
 def params_from_args(args: argparse.Namespace) -> Params:
@@ -43,5 +53,9 @@ def params_from_args(args: argparse.Namespace) -> Params:
 def add_topic_options(parser: argparse.ArgumentParser) -> None:
     g = parser.add_argument_group("topics", "needed only when a message type has several topics")
     for kind in ("imu", "gnss", "wheel", "truth"):
-        g.add_argument(f"--{kind}-topic", metavar="TOPIC", default=None,
-                       help=f"topic to read the {kind} stream from")
+        g.add_argument(
+            f"--{kind}-topic",
+            metavar="TOPIC",
+            default=None,
+            help=f"topic to read the {kind} stream from",
+        )
