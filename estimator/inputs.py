@@ -109,9 +109,10 @@ def open_inputs(
         if len(dist) and dist.min() > MAX_ROUTE_DISTANCE_M:
             far = _geodesic_gap(log, frame, line)
             swapped = _swapped(line)
-            if swapped is not None and (
-                near := _geodesic_gap(log, frame, swapped)
-            ) <= MAX_ROUTE_DISTANCE_M:
+            if (
+                swapped is not None
+                and (near := _geodesic_gap(log, frame, swapped)) <= MAX_ROUTE_DISTANCE_M
+            ):
                 raise RouteError(
                     route_path,
                     f"route is {far / 1000:.1f} km from {Path(log_path).name}, but "
