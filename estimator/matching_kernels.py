@@ -669,3 +669,65 @@ def _scan_direct(
         c11 -= sw * ay * by
         tr = np.hypot(c00 + c11, c01 - c10)
         ms[k] = max(saa + sbb - 2.0 * tr, 0.0) / sw
+
+
+@njit(cache=True)
+def max_turn_deg(xy: F64, stretch_m: float, spacing_m: float) -> float:
+    """The largest heading change over any ``stretch_m`` of a polyline, in degrees: the
+    polyline resampled every ``spacing_m`` from its end (as matching.resample_polyline), the
+    unwrapped headings of its steps, the largest max - min over ``stretch_m / spacing_m`` + 1
+    consecutive headings (runner._max_turn_deg's numpy code, to rounding)."""
+    n_in = xy.shape[0]
+    c = np.empty(n_in)
+    c[0] = 0.0
+    for i in range(1, n_in):
+        c[i] = c[i - 1] + np.hypot(xy[i, 0] - xy[i - 1, 0], xy[i, 1] - xy[i - 1, 1])
+    total = c[n_in - 1]
+    n = int(np.floor(total / spacing_m + 1e-9)) + 1
+    if n < 3:
+        return 0.0
+    px = np.empty(n)
+    py = np.empty(n)
+    j = 0
+    for k in range(n):
+        at = total - spacing_m * (n - 1 - k)
+        if at <= c[0]:
+            px[k], py[k] = xy[0, 0], xy[0, 1]
+            continue
+        if at >= total:
+            px[k], py[k] = xy[n_in - 1, 0], xy[n_in - 1, 1]
+            continue
+        while j < n_in - 2 and c[j + 1] <= at:
+            j += 1
+        d = c[j + 1] - c[j]
+        f = (at - c[j]) / d if d > 0 else 0.0
+        px[k] = xy[j, 0] + f * (xy[j + 1, 0] - xy[j, 0])
+        py[k] = xy[j, 1] + f * (xy[j + 1, 1] - xy[j, 1])
+    m = n - 1
+    heading = np.empty(m)
+    for k in range(m):
+        heading[k] = np.arctan2(py[k + 1] - py[k], px[k + 1] - px[k])
+    # unwrap
+    corr = 0.0
+    prev = heading[0]
+    for k in range(1, m):
+        raw = heading[k]
+        dd = raw - prev
+        prev = raw
+        ddmod = (dd + np.pi) % (2.0 * np.pi) - np.pi
+        if ddmod == -np.pi and dd > 0:
+            ddmod = np.pi
+        if abs(dd) >= np.pi:
+            corr += ddmod - dd
+        heading[k] = raw + corr
+    w = max(int(np.rint(stretch_m / spacing_m)), 1)
+    if m <= w:
+        return np.degrees(heading.max() - heading.min())
+    best = 0.0
+    for k in range(m - w):
+        lo = hi = heading[k]
+        for i in range(k + 1, k + w + 1):
+            lo = min(lo, heading[i])
+            hi = max(hi, heading[i])
+        best = max(best, hi - lo)
+    return np.degrees(best)

@@ -43,9 +43,9 @@ from .matching import (
     judge_match,
     learn_lane_offset,
     match_geometry,
-    resample_polyline,
     route_arc_length,
 )
+from .matching_kernels import max_turn_deg
 from .params import Method, Params, for_method
 from .results import Epochs, MatchRecord, Run
 from .route import Route
@@ -1115,17 +1115,11 @@ def _disagreeing_fixes(
 
 
 def _max_turn_deg(xy: F64, stretch_m: float, spacing_m: float) -> float:
-    """The largest heading change over any ``stretch_m`` of a polyline, in degrees."""
-    pts = resample_polyline(xy, spacing_m, anchor="end")
-    if len(pts) < 3:
-        return 0.0
-    d = np.diff(pts, axis=0)
-    heading = np.unwrap(np.arctan2(d[:, 1], d[:, 0]))
-    n = max(round(stretch_m / spacing_m), 1)
-    if len(heading) <= n:
-        return float(np.degrees(np.ptp(heading)))
-    win = np.lib.stride_tricks.sliding_window_view(heading, n + 1)
-    return float(np.degrees(np.max(win.max(axis=1) - win.min(axis=1))))
+    """The largest heading change over any ``stretch_m`` of a polyline, in degrees (the
+    polyline resampled every ``spacing_m`` from its end; compiled:
+    :func:`estimator.matching_kernels.max_turn_deg`)."""
+    pts = np.ascontiguousarray(np.asarray(xy, np.float64)[:, :2])
+    return float(max_turn_deg(pts, float(stretch_m), float(spacing_m)))
 
 
 UNOBSERVED_VAR = 1e8

@@ -436,6 +436,33 @@ def test_compiled_rivals_are_the_python_rivals(seed, change):
             _close(g[2], w[2], "cost")
 
 
+def ref_max_turn_deg(xy, stretch_m, spacing_m):
+    """runner._max_turn_deg in numpy (before the kernel)."""
+    pts = matching.resample_polyline(xy, spacing_m, anchor="end")
+    if len(pts) < 3:
+        return 0.0
+    d = np.diff(pts, axis=0)
+    heading = np.unwrap(np.arctan2(d[:, 1], d[:, 0]))
+    n = max(round(stretch_m / spacing_m), 1)
+    if len(heading) <= n:
+        return float(np.degrees(np.ptp(heading)))
+    win = np.lib.stride_tricks.sliding_window_view(heading, n + 1)
+    return float(np.degrees(np.max(win.max(axis=1) - win.min(axis=1))))
+
+
+@pytest.mark.parametrize("seed", range(40))
+def test_max_turn_is_the_numpy_max_turn(seed):
+    from estimator.runner import _max_turn_deg
+
+    rng = np.random.default_rng(seed)
+    n = int(rng.integers(2, 1500))
+    head = np.cumsum(rng.normal(0, rng.choice([0.01, 0.3, 2.0]), n))
+    step = rng.uniform(0.01, 3.0, n)
+    xy = 1e4 + np.cumsum(np.column_stack([np.cos(head), np.sin(head)]) * step[:, None], 0)
+    for stretch, spacing in ((250.0, 5.0), (100.0, 3.0), (50.0, 7.5)):
+        _close(_max_turn_deg(xy, stretch, spacing), ref_max_turn_deg(xy, stretch, spacing), "turn")
+
+
 # ---------------------------------------------------------------------------------------------
 # end to end
 
