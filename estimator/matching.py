@@ -33,6 +33,7 @@ from .matching_kernels import (
     project_window,
     rigid_fit,
     rival_score,
+    rotation_sigma,
     segment_index,
     segment_points,
     track_chunks,
@@ -626,15 +627,18 @@ def _rotation_sigma(win: F64, fit: _Fit, pos_cov2: F64, params: Params) -> float
     """1-sigma of the fitted rotation read as a heading correction (yaw + rotation_rad): the
     shape noise over the window's spread, plus what an along-track error the fit could not
     see turns into on a bend (sliding along a curve of curvature k is a rotation of k ds)."""
-    a = win[fit.valid] - win[fit.valid].mean(axis=0)
-    spread = float(np.sum(a * a))
-    noise2 = max(fit.residual**2 / 2.0, params.pseudo.shape_noise_m**2)
-    q = fit.route_points[fit.valid]
-    d0, d1 = q[1] - q[0], q[-1] - q[-2]
-    turn = abs(float(np.arctan2(d0[0] * d1[1] - d0[1] * d1[0], d0 @ d1)))
-    length = max(float(np.sum(np.hypot(*np.diff(q, axis=0).T))), 1e-9)
-    along2 = min(fit.along_sigma**2, float(fit.tangent @ pos_cov2 @ fit.tangent))
-    return float(np.sqrt(noise2 / max(spread, 1e-9) + (turn / length) ** 2 * along2))
+    return float(
+        rotation_sigma(
+            np.ascontiguousarray(win, np.float64),
+            fit.valid,
+            fit.route_points,
+            float(fit.residual),
+            float(params.pseudo.shape_noise_m),
+            float(fit.along_sigma),
+            np.ascontiguousarray(fit.tangent, np.float64),
+            np.ascontiguousarray(pos_cov2, np.float64),
+        )
+    )
 
 
 def _gate(

@@ -731,3 +731,71 @@ def max_turn_deg(xy: F64, stretch_m: float, spacing_m: float) -> float:
             hi = max(hi, heading[i])
         best = max(best, hi - lo)
     return np.degrees(best)
+
+
+@njit(cache=True)
+def rotation_sigma(
+    win: F64,
+    valid: NDArray[np.bool_],
+    q: F64,
+    residual: float,
+    shape_noise: float,
+    along_sigma: float,
+    tangent: F64,
+    cov: F64,
+) -> float:
+    """matching._rotation_sigma (the fitted rotation's 1-sigma as a heading correction), to
+    rounding; recorded only, never applied."""
+    n = win.shape[0]
+    m = 0
+    mx = my = 0.0
+    for i in range(n):
+        if valid[i]:
+            m += 1
+            mx += win[i, 0]
+            my += win[i, 1]
+    mx /= m
+    my /= m
+    spread = 0.0
+    for i in range(n):
+        if valid[i]:
+            ax = win[i, 0] - mx
+            ay = win[i, 1] - my
+            spread += ax * ax + ay * ay
+    noise2 = max(residual**2 / 2.0, shape_noise**2)
+    first = last = -1
+    second = before_last = -1
+    length = 0.0
+    prev = -1
+    for i in range(n):
+        if valid[i]:
+            if first < 0:
+                first = i
+            elif second < 0:
+                second = i
+            if prev >= 0:
+                length += np.hypot(q[i, 0] - q[prev, 0], q[i, 1] - q[prev, 1])
+            before_last, last = last, i
+            prev = i
+    d0x, d0y = q[second, 0] - q[first, 0], q[second, 1] - q[first, 1]
+    d1x, d1y = q[last, 0] - q[before_last, 0], q[last, 1] - q[before_last, 1]
+    turn = abs(np.arctan2(d0x * d1y - d0y * d1x, d0x * d1x + d0y * d1y))
+    length = max(length, 1e-9)
+    t0, t1 = tangent[0], tangent[1]
+    tct = t0 * (cov[0, 0] * t0 + cov[0, 1] * t1) + t1 * (cov[1, 0] * t0 + cov[1, 1] * t1)
+    along2 = min(along_sigma**2, tct)
+    return np.sqrt(noise2 / max(spread, 1e-9) + (turn / length) ** 2 * along2)
+
+
+@njit(cache=True)
+def search_right(x: F64, value: float) -> int:
+    """``np.searchsorted(x, value, side="right")`` on a sorted 1-D array of any stride (a column
+    of the run's output rows), without numpy's contiguous copy of it."""
+    lo, hi = 0, x.shape[0]
+    while lo < hi:
+        mid = (lo + hi) // 2
+        if x[mid] <= value:
+            lo = mid + 1
+        else:
+            hi = mid
+    return lo

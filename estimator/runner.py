@@ -45,7 +45,7 @@ from .matching import (
     match_geometry,
     route_arc_length,
 )
-from .matching_kernels import max_turn_deg
+from .matching_kernels import max_turn_deg, search_right
 from .params import Method, Params, for_method
 from .results import Epochs, MatchRecord, Run
 from .route import Route
@@ -756,7 +756,7 @@ class _Driver:
         velocity only (no correction jumps), translated to end at the estimate."""
         dist = out[:n_out, ekf.O_DIST]
         d_now = float(aux[ekf.A_DIST])
-        i0 = max(int(np.searchsorted(dist, d_now - length_m, side="right")) - 1, 0)
+        i0 = max(search_right(dist, d_now - length_m) - 1, 0)
         m = n_out - i0
         dr = np.empty((m + 1, 2))
         dr[:m] = out[i0:n_out, ekf.O_DR : ekf.O_DR + 2]

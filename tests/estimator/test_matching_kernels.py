@@ -463,6 +463,47 @@ def test_max_turn_is_the_numpy_max_turn(seed):
         _close(_max_turn_deg(xy, stretch, spacing), ref_max_turn_deg(xy, stretch, spacing), "turn")
 
 
+def ref_rotation_sigma(win, fit, pos_cov2, params):
+    """matching._rotation_sigma in numpy (before the kernel)."""
+    a = win[fit.valid] - win[fit.valid].mean(axis=0)
+    spread = float(np.sum(a * a))
+    noise2 = max(fit.residual**2 / 2.0, params.pseudo.shape_noise_m**2)
+    q = fit.route_points[fit.valid]
+    d0, d1 = q[1] - q[0], q[-1] - q[-2]
+    turn = abs(float(np.arctan2(d0[0] * d1[1] - d0[1] * d1[0], d0 @ d1)))
+    length = max(float(np.sum(np.hypot(*np.diff(q, axis=0).T))), 1e-9)
+    along2 = min(fit.along_sigma**2, float(fit.tangent @ pos_cov2 @ fit.tangent))
+    return float(np.sqrt(noise2 / max(spread, 1e-9) + (turn / length) ** 2 * along2))
+
+
+@pytest.mark.parametrize("seed", range(30))
+def test_rotation_sigma_is_the_numpy_one(seed):
+    rng = np.random.default_rng(seed)
+    params = Params()
+    route = Route(_random_polyline(rng, 60))
+    q = route.point_at(
+        rng.uniform(-30.0, route.length / 2) + 5.0 * np.arange(int(rng.integers(2, 50)))
+    )
+    win = q + rng.normal(0, 0.5, q.shape)
+    a = rng.normal(size=(2, 2))
+    cov = a @ a.T + np.eye(2) * rng.choice([1e-3, 10.0])
+    fit = matching._fit(win, win[-1], route, float(matching._anchor(route, win[0])), 0.0, params)
+    if fit is None:
+        return
+    got = matching._rotation_sigma(win, fit, cov, params)
+    _close(got, ref_rotation_sigma(win, fit, cov, params), "heading sigma")
+
+
+def test_column_search_is_searchsorted():
+    from estimator.matching_kernels import search_right
+
+    rows = np.zeros((500, 26))
+    rows[:, 17] = np.cumsum(np.random.default_rng(0).choice([0.0, 0.5, 1.3], 500))
+    col = rows[:, 17]
+    for v in (-1.0, 0.0, 3.0, float(col[250]), float(col[-1]), 1e9):
+        assert search_right(col, v) == np.searchsorted(col, v, side="right")
+
+
 # ---------------------------------------------------------------------------------------------
 # end to end
 
