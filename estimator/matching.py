@@ -71,12 +71,18 @@ def resample_polyline(
     the polyline's start.
     """
     p = np.asarray(xy, np.float64)[:, :2]
-    c = np.r_[0.0, np.cumsum(np.hypot(*np.diff(p, axis=0).T))]
+    d = p[1:] - p[:-1]
+    c = np.empty(len(p))
+    c[0] = 0.0
+    np.cumsum(np.hypot(d[:, 0], d[:, 1]), out=c[1:])
     total = float(c[-1])
     n = int(np.floor(total / spacing + 1e-9)) + 1
     steps = spacing * np.arange(n)
     at = total - steps[::-1] if anchor == "end" else steps
-    return np.column_stack([np.interp(at, c, p[:, 0]), np.interp(at, c, p[:, 1])])
+    out = np.empty((n, 2))
+    out[:, 0] = np.interp(at, c, p[:, 0])
+    out[:, 1] = np.interp(at, c, p[:, 1])
+    return out
 
 
 def kabsch_2d(src: ArrayLike, dst: ArrayLike, weights: ArrayLike | None = None) -> tuple[F64, F64]:
@@ -157,8 +163,9 @@ def _project_near(
 ) -> tuple[F64, F64]:
     """``route.project(xy, s_guess, search_m)``'s arc lengths and lateral offsets, compiled
     (bit for bit) for the matcher's few points per attempt."""
-    p = np.ascontiguousarray(np.atleast_2d(np.asarray(xy, np.float64))[:, :2])
-    g = np.ascontiguousarray(np.broadcast_to(np.asarray(s_guess, np.float64), (len(p),)))
+    p = np.ascontiguousarray(np.asarray(xy, np.float64).reshape(-1, np.shape(xy)[-1])[:, :2])
+    g = np.empty(len(p))
+    g[:] = s_guess
     s = np.empty(len(p))
     lat = np.empty(len(p))
     project_window(route.xy, route.s, route._unit, route._seglen, p, g, float(search_m), s, lat)
@@ -170,7 +177,7 @@ def _local_route(xy: F64, like: Route) -> Route:
     with the arrays computed by a compiled kernel (the same values, bit for bit) instead of
     the constructor's dozen small numpy calls."""
     kept, seglen, unit, s = polyline_arrays(np.ascontiguousarray(xy, np.float64))
-    if len(kept) < 2 or not np.all(np.isfinite(kept)):
+    if len(kept) < 2 or not np.isfinite(kept).all():
         return Route(xy, name=like.name, source=like.source)  # raises its own error
     removed = len(xy) - len(kept)
     route = object.__new__(Route)
@@ -557,7 +564,7 @@ def _fit(
 
     offset, curvature, sigma = 0.0, 0.0, float("inf")
     k = int(np.argmin(ms)) if ext.along_track_search else len(deltas) // 2
-    if 0 < k < len(deltas) - 1 and np.all(np.isfinite(ms[k - 1 : k + 2])):
+    if 0 < k < len(deltas) - 1 and np.isfinite(ms[k - 1 : k + 2]).all():
         jm, j0, jp = ms[k - 1], ms[k], ms[k + 1]
         curvature = float((jm - 2.0 * j0 + jp) / step**2)
         noise2 = max(float(j0) / 2.0, po.shape_noise_m**2)
@@ -652,6 +659,11 @@ def _shape_gates(fit: _Fit, params: Params) -> list[GateDecision]:
     return _shape_gates_of(_shape_values(fit), params)
 
 
+@functools.lru_cache(maxsize=64)
+def _cos_deg(angle_deg: float) -> float:
+    return float(np.cos(np.radians(angle_deg)))
+
+
 def _shape_values(fit: _Fit) -> tuple[float, float, float, float]:
     """What the shape gates test: pairs, heading cosine, residual, |rotation| in degrees."""
     return (fit.n_pairs, fit.heading_cos, fit.residual, float(np.degrees(abs(fit.angle))))
@@ -667,7 +679,7 @@ def _shape_gates_of(
         _gate(
             "heading",
             heading_cos,
-            float(np.cos(np.radians(g.max_heading_diff_deg))),
+            _cos_deg(g.max_heading_diff_deg),
             ">=",
             "signed cosine between DR and route end directions",
         ),
@@ -822,7 +834,7 @@ def _check_inputs(
     cov = np.asarray(pos_cov2, np.float64)
     if cov.shape != (2, 2):
         raise RoutefuseError(None, f"route match: position covariance must be 2x2, got {cov.shape}")
-    if not (np.all(np.isfinite(w)) and np.all(np.isfinite(p)) and np.all(np.isfinite(cov))):
+    if not (np.isfinite(w).all() and np.isfinite(p).all() and np.isfinite(cov).all()):
         raise RoutefuseError(None, "route match: window, position or covariance is not finite")
     return w, p, 0.5 * (cov + cov.T)
 
