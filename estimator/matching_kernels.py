@@ -799,3 +799,30 @@ def search_right(x: F64, value: float) -> int:
         else:
             hi = mid
     return lo
+
+
+@njit(cache=True)
+def track_window(dr: F64, dist: F64, dr_now: F64, d_now: float, i0: int, shift: F64) -> F64:
+    """The runner's DR window: rows ``i0:`` of the DR track ``dr`` and the current point
+    ``dr_now`` (``dist``: distance travelled at each), without the rows at which the vehicle
+    had not moved on by 1e-6 m before the next, all moved by ``shift`` (bit for bit what the
+    numpy code computed)."""
+    m = dr.shape[0] - i0
+    keep = np.empty(m + 1, np.bool_)
+    count = 1
+    for k in range(m):
+        d_next = dist[i0 + k + 1] if k + 1 < m else d_now
+        keep[k] = (d_next - dist[i0 + k]) > 1e-6
+        if keep[k]:
+            count += 1
+    keep[m] = True
+    out = np.empty((count, 2))
+    r = 0
+    for k in range(m):
+        if keep[k]:
+            out[r, 0] = dr[i0 + k, 0] + shift[0]
+            out[r, 1] = dr[i0 + k, 1] + shift[1]
+            r += 1
+    out[r, 0] = dr_now[0] + shift[0]
+    out[r, 1] = dr_now[1] + shift[1]
+    return out

@@ -45,7 +45,7 @@ from .matching import (
     match_geometry,
     route_arc_length,
 )
-from .matching_kernels import max_turn_deg, search_right
+from .matching_kernels import max_turn_deg, search_right, track_window
 from .params import Method, Params, for_method
 from .results import Epochs, MatchRecord, Run
 from .route import Route
@@ -757,18 +757,14 @@ class _Driver:
         dist = out[:n_out, ekf.O_DIST]
         d_now = float(aux[ekf.A_DIST])
         i0 = max(search_right(dist, d_now - length_m) - 1, 0)
-        m = n_out - i0
-        dr = np.empty((m + 1, 2))
-        dr[:m] = out[i0:n_out, ekf.O_DR : ekf.O_DR + 2]
-        dr[m] = aux[ekf.A_DR : ekf.A_DR + 2]
-        d = np.empty(m + 1)
-        d[:m] = dist[i0:]
-        d[m] = d_now
-        keep = np.empty(m + 1, bool)
-        keep[:m] = (d[1:] - d[:-1]) > 1e-6
-        keep[m] = True
-        dr = dr[keep]
-        return dr + (x[:2] - aux[ekf.A_DR : ekf.A_DR + 2])
+        return track_window(
+            out[:n_out, ekf.O_DR : ekf.O_DR + 2],
+            dist,
+            aux[ekf.A_DR : ekf.A_DR + 2],
+            d_now,
+            i0,
+            x[:2] - aux[ekf.A_DR : ekf.A_DR + 2],
+        )
 
     def _match(self, out: F64, n_out: int, x: F64, P: F64, aux: F64) -> MatchRecord:
         """One attempt's match (P must be propagated to the attempt time).

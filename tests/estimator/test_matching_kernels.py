@@ -504,6 +504,36 @@ def test_column_search_is_searchsorted():
         assert search_right(col, v) == np.searchsorted(col, v, side="right")
 
 
+def ref_window(out, n_out, x, aux, length_m):
+    """runner._Driver._window in numpy (before the kernel)."""
+    from estimator import ekf
+
+    dist = out[:n_out, ekf.O_DIST]
+    d_now = float(aux[ekf.A_DIST])
+    i0 = max(int(np.searchsorted(dist, d_now - length_m, side="right")) - 1, 0)
+    dr = np.vstack([out[i0:n_out, ekf.O_DR : ekf.O_DR + 2], aux[ekf.A_DR : ekf.A_DR + 2]])
+    d = np.r_[dist[i0:], d_now]
+    keep = np.r_[np.diff(d) > 1e-6, True]
+    return dr[keep] + (x[:2] - aux[ekf.A_DR : ekf.A_DR + 2])
+
+
+@pytest.mark.parametrize("seed", range(10))
+def test_window_is_the_numpy_window(seed):
+    from estimator import ekf
+    from estimator.runner import _Driver
+
+    rng = np.random.default_rng(seed)
+    n = int(rng.integers(1, 3000))
+    out = rng.normal(size=(n + 50, ekf.NO)) * 1e3
+    out[:n, ekf.O_DIST] = np.cumsum(rng.choice([0.0, 1e-7, 0.5, 1.5], n))
+    aux = rng.normal(size=ekf.NA) * 1e3
+    aux[ekf.A_DIST] = out[n - 1, ekf.O_DIST] + rng.choice([0.0, 1e-7, 0.7])
+    x = rng.normal(size=ekf.NX) * 1e3
+    for length in (5.0, 250.0, 1e6):
+        got = _Driver._window(None, out, n, x, aux, length)  # type: ignore[arg-type]
+        np.testing.assert_array_equal(got, ref_window(out, n, x, aux, length))
+
+
 # ---------------------------------------------------------------------------------------------
 # end to end
 
