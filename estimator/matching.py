@@ -659,6 +659,19 @@ def _shape_gates(fit: _Fit, params: Params) -> list[GateDecision]:
     return _shape_gates_of(_shape_values(fit), params)
 
 
+def _shape_passes(values: tuple[float, float, float, float], params: Params) -> bool:
+    """Whether every shape gate passes (what :func:`_shape_gates_of` would decide, without
+    building the decisions)."""
+    g = params.gates
+    n_pairs, heading_cos, residual, rotation_deg = values
+    return bool(
+        n_pairs >= float(g.min_pairs)
+        and heading_cos >= _cos_deg(g.max_heading_diff_deg)
+        and residual <= float(g.max_residual_m)
+        and rotation_deg <= float(g.max_rotation_deg)
+    )
+
+
 @functools.lru_cache(maxsize=64)
 def _cos_deg(angle_deg: float) -> float:
     return float(np.cos(np.radians(angle_deg)))
@@ -1100,7 +1113,7 @@ def judge_match(
             )
         )
         for name, shape, rival_cost in sc.rivals:
-            plausible = all(d.passed for d in _shape_gates_of(shape, params))
+            plausible = _shape_passes(shape, params)
             margin = rival_cost - sc.cost if plausible else float("inf")
             note = (
                 f"rival cost minus candidate cost ({name} "

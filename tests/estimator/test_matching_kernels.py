@@ -534,6 +534,22 @@ def test_window_is_the_numpy_window(seed):
         np.testing.assert_array_equal(got, ref_window(out, n, x, aux, length))
 
 
+def test_shape_passes_is_every_shape_gate_passing():
+    rng = np.random.default_rng(0)
+    params = Params()
+    g = params.gates
+    edge = (g.min_pairs, float(np.cos(np.radians(g.max_heading_diff_deg))), g.max_residual_m)
+    for _ in range(2000):
+        values = (
+            int(rng.choice([0, g.min_pairs - 1, g.min_pairs, 80])),
+            float(rng.choice([edge[1], 1.0, 0.5, np.nan, np.nextafter(edge[1], 0)])),
+            float(rng.choice([edge[2], 0.1, 7.0, np.nan])),
+            float(rng.choice([g.max_rotation_deg, 0.2, 30.0])),
+        )
+        want = all(d.passed for d in matching._shape_gates_of(values, params))
+        assert matching._shape_passes(values, params) == want
+
+
 # ---------------------------------------------------------------------------------------------
 # end to end
 
