@@ -216,7 +216,42 @@ def deviation_series(
     """Position and heading deviation from the route at every epoch, and the errors against
     truth where the log has it. ``subtract_lane_offset``: measure from the lane the vehicle
     kept under good GNSS (learned as the estimator learns it, with ``params.offset``) rather
-    than from the route centreline."""
+    than from the route centreline.
+
+    The inspector asks for the same run's series twice per session (plot and table) and for
+    the unchanged baseline after every parameter change, so the last few results are kept,
+    by the identity of the (immutable) epochs, route and log they were computed from."""
+    key = (
+        id(run.epochs),
+        id(route),
+        id(log),
+        run.degraded_intervals,
+        run.frame,
+        run.params.sensors,
+        subtract_lane_offset,
+        (params or run.params) if subtract_lane_offset else None,
+    )
+    for entry_key, owners, series in _SERIES_CACHE:
+        if entry_key == key and owners[0] is run.epochs:
+            return series
+    series = _deviation_series(run, route, log, subtract_lane_offset, params)
+    _SERIES_CACHE.insert(0, (key, (run.epochs, route, log), series))
+    del _SERIES_CACHE[_SERIES_CACHE_SIZE:]
+    return series
+
+
+_SERIES_CACHE_SIZE = 6
+_SERIES_CACHE: list[tuple[tuple, tuple[object, ...], DeviationSeries]] = []
+"""(key, the objects whose ids are in it, kept alive so an id is not reused, series)"""
+
+
+def _deviation_series(
+    run: Run,
+    route: Route,
+    log: Log | None,
+    subtract_lane_offset: bool,
+    params: Params | None,
+) -> DeviationSeries:
     ep = run.epochs
     xy = ep.position[:, :2]
     s, lat = track_on_route(route, xy)

@@ -178,7 +178,9 @@ def run(
         )
     else:
         driver.start()
-    epochs = driver.epochs()
+    # a baseline after a baseline is the previous run: share its (immutable) epochs, so what
+    # was computed from them can be recognised (metrics.deviation_series)
+    epochs = reuse.epochs if driver.copied_whole_run and reuse is not None else driver.epochs()
     if progress is not None:
         progress(1.0)
     resume = _Resume(
@@ -603,6 +605,8 @@ class _Driver:
     """this run's match geometries and long-window turns, by their inputs"""
     known_memo: dict[tuple, Any] = field(default_factory=dict)
     """the previous run's, when this one reuses it"""
+    copied_whole_run: bool = False
+    """the run is the reused one (a baseline after a baseline)"""
 
     # --- state handling
     def _set_state(self, x: F64, P: F64, aux: F64, idx: NDArray[np.int64]) -> None:
@@ -954,6 +958,7 @@ class _Driver:
             # baseline after baseline: the filter and its inputs are the same, so is the run
             self._copy_old(old, len(old.checkpoints), old.n_out)
             self.records = []
+            self.copied_whole_run = True
             return
         if not self.matching or not reuse_matching or not same_trigger:
             if not outage_cps:

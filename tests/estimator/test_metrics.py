@@ -300,3 +300,22 @@ def test_paper_table_layout():
     assert md.splitlines()[0].count("|") == 2 + 5 + 6 + 1
     assert "Along RMSE [m]" in md
     assert md.splitlines()[3].count(" - ") == 6  # no truth for that row
+
+
+def test_deviation_series_of_the_same_run_is_computed_once():
+    """The inspector asks twice per session (plot, table): the second is the first's result;
+    anything the series depends on gives a new one."""
+    run = make_run(np.zeros(301), 0.0)
+    log = make_log()
+    first = deviation_series(run, ROUTE, log)
+    assert deviation_series(run, ROUTE, log) is first
+    assert deviation_series(replace(run, matches=()), ROUTE, log) is first  # same epochs
+    other = make_run(np.ones(301), 0.0)
+    assert deviation_series(other, ROUTE, log) is not first
+    np.testing.assert_array_equal(deviation_series(other, ROUTE, log).pos_dev_m, 1.0)
+    assert deviation_series(run, ROUTE, None) is not first
+    assert deviation_series(run, Route(ROUTE.xy.copy()), log) is not first
+    shifted = replace(run, params=with_values(Params(), {"sensors.truth_time_offset_s": 0.1}))
+    assert deviation_series(shifted, ROUTE, log) is not first
+    lane = deviation_series(run, ROUTE, log, subtract_lane_offset=True)
+    assert lane is not first

@@ -374,6 +374,7 @@ def test_baseline_after_baseline_reuses_the_whole_run(tunnel, monkeypatch):
     again = run(log, route, p, method="baseline", frame=frame, reuse=base)
     assert _same_epochs(again, fresh) and again.params == p and again.matches == ()
     assert again.dropped_fix_times == fresh.dropped_fix_times
+    assert again.epochs is base.epochs  # shared: what was computed from them is recognised
 
 
 @pytest.mark.parametrize(
