@@ -577,7 +577,8 @@ def _fit(
                 sigma = 0.5 * (bounds[1] - bounds[0])
                 if curvature > 0:
                     offset = float(deltas[k] + 0.5 * step * (jm - jp) / (jm - 2.0 * j0 + jp))
-                offset = float(np.clip(offset if curvature > 0 else deltas[k], *bounds))
+                lo, hi = bounds
+                offset = min(max(float(offset if curvature > 0 else deltas[k]), lo), hi)
         elif curvature > 0:
             sigma = float(np.sqrt(2.0 * noise2 / (max(m[k], 1.0) * curvature)))
     observed = sigma < po.along_sigma_max_m
