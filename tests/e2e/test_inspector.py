@@ -7,7 +7,7 @@ from __future__ import annotations
 import re
 import shutil
 import time
-from collections.abc import Iterator
+from collections.abc import Callable, Iterator
 from pathlib import Path
 
 import numpy as np
@@ -61,14 +61,14 @@ def inspector(tmp_path_factory):
         server.stop()
 
 
-def _wait(predicate, timeout: float = 30.0, what: str = "condition"):
+def _wait(predicate, timeout: float = 30.0, what: str | Callable[[], str] = "condition"):
     deadline = time.monotonic() + timeout
     while time.monotonic() < deadline:
         value = predicate()
         if value:
             return value
         time.sleep(0.1)
-    raise AssertionError(f"timed out waiting for {what}")
+    raise AssertionError(f"timed out waiting for {what() if callable(what) else what}")
 
 
 def _open(browser, inspector, *, settle: bool = True, viewport: dict | None = None):
@@ -385,11 +385,20 @@ def test_four_pages_keep_their_time_and_share_a_parameter_change(browser, inspec
     unsubscribe = controller.subscribe(on_session=sessions.append)
     try:
         _click(pg1, "next ›")
+        # Dispatched (these pages need not finish compiling shaders), in rounds across the
+        # pages: viser's panel sends at most one update per 50 ms and keeps only the latest of a
+        # burst, so a page's own clicks are spaced the way a person's are.
+        for round_ in range(len(others)):
+            for k, (pg, _) in enumerate(others, start=1):
+                if round_ < k:
+                    pg.get_by_role("button", name="10 »", exact=True).dispatch_event("click")
+            time.sleep(0.15)
         for k, (pg, _) in enumerate(others, start=1):
-            for _ in range(k):  # dispatched: these pages need not finish compiling shaders
-                pg.get_by_role("button", name="10 »", exact=True).dispatch_event("click")
-        for k, (pg, _) in enumerate(others, start=1):
-            _wait(lambda pg=pg, k=k: _frame(pg) == 1 + 10 * k, 20, f"page {k + 1} to step")
+            _wait(
+                lambda pg=pg, k=k: _frame(pg) == 1 + 10 * k,
+                30,
+                lambda pg=pg, k=k: f"page {k + 1} to reach frame {1 + 10 * k} (at {_frame(pg)})",
+            )
         frames = [_frame(pg) for pg, _ in pages]
         assert len(set(frames)) == 4, frames
         views = [view1, *new_views]
