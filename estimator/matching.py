@@ -604,7 +604,7 @@ def _fit(
     normal = np.array([-tangent[1], tangent[0]])
     z = p_ref + lane_offset * normal
     if ext.geometry_covariance:
-        cross = max(po.cross_sigma_m, residual)
+        cross = max(po.cross_sigma_m, po.cross_residual_factor * residual)
         basis = np.column_stack([tangent, normal])
         obs_cov = basis @ np.diag([sigma**2, cross**2]) @ basis.T
     else:
@@ -806,6 +806,7 @@ def _rival_scores(
             po.along_sigma_min_m,
             po.cross_sigma_m,
             po.sigma_m,
+            po.cross_residual_factor,
         ]
     )
     z_lane = 0.0 if lane_path else lane

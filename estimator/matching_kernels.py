@@ -489,12 +489,13 @@ def rival_score(
     else ``out`` = (n_pairs, heading cosine, residual, |rotation| in degrees, cost).
 
     ``cfg`` = (spacing, along step, along_track_search, geometry_covariance, shape_noise,
-    along_sigma_max, along_sigma_min, cross_sigma, sigma_m); ``k_center``: the offset index
-    used without the along-track search."""
+    along_sigma_max, along_sigma_min, cross_sigma, sigma_m, cross_residual_factor);
+    ``k_center``: the offset index used without the along-track search."""
     h, step = cfg[0], cfg[1]
     along_search = cfg[2] > 0.0
     geometry_cov = cfg[3] > 0.0
     shape_noise, sig_max, sig_min, cross_sigma, sigma_m = cfg[4], cfg[5], cfg[6], cfg[7], cfg[8]
+    cross_factor = cfg[9]
     # --- the piece (matching._piece)
     length = rs[rs.shape[0] - 1]
     lo = max(lo, 0.0)
@@ -592,7 +593,7 @@ def rival_score(
     zx = prx + lane_offset * nx
     zy = pry + lane_offset * ny
     if geometry_cov:
-        cross = max(cross_sigma, residual)
+        cross = max(cross_sigma, cross_factor * residual)
         a, b = sigma**2, cross**2
         r00 = t[0] * t[0] * a + nx * nx * b
         r01 = t[0] * t[1] * a + nx * ny * b

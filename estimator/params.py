@@ -193,12 +193,21 @@ class PseudoObsParams:
         step=0.05,
     )
     cross_sigma_m: float = param(
-        1.0,
-        "cross-track 1-sigma when R follows route geometry (raised to the fit residual)",
+        0.3,
+        "smallest cross-track 1-sigma when R follows route geometry",
         unit="m",
         lo=0.05,
         hi=100,
         step=0.05,
+    )
+    cross_residual_factor: float = param(
+        8.0,
+        "cross-track 1-sigma is at least this many registration residuals: a window the route "
+        "fits to centimetres holds the estimate to the route, one it fits loosely (a coarse "
+        "map cutting a curve) only softly",
+        lo=0,
+        hi=100,
+        step=0.5,
     )
     along_sigma_min_m: float = param(
         0.5,

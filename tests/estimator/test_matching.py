@@ -269,8 +269,9 @@ def test_mahalanobis_gate_uses_the_filter_covariance():
     tight = match(dr, route, lane=0.0, cov=0.25)
     loose = match(dr, route, lane=0.0, cov=25.0)
     g = gate(tight, "mahalanobis")
-    # S = 0.25 + cross_sigma^2 across the road: d2 = 4.5^2 / (0.25 + 1)
-    assert g.value == pytest.approx(4.5**2 / 1.25, rel=1e-3)
+    # S = 0.25 + cross_sigma^2 across the road (the fit is exact: the floor applies)
+    cross2 = Params().pseudo.cross_sigma_m ** 2
+    assert g.value == pytest.approx(4.5**2 / (0.25 + cross2), rel=1e-3)
     assert tight.verdict == "rejected: mahalanobis"
     assert gate(loose, "mahalanobis").passed
     assert loose.accepted, loose.verdict
@@ -408,6 +409,24 @@ def test_along_track_is_unobserved_on_a_constant_bend():
     assert rec.extra["along_observed"] == 0.0
     assert rec.extra["along_offset_m"] == 0.0
     assert rec.extra["along_sigma_m"] == Params().pseudo.along_sigma_max_m
+
+
+@pytest.mark.parametrize("wiggle", [0.02, 0.5])
+def test_cross_track_sigma_follows_the_registration_residual(wiggle):
+    """A window the route fits to centimetres is trusted to the floor; a loose fit (here the
+    DR wiggles across the road) only to cross_residual_factor residuals."""
+    route = straight()
+    path = driven(route, 600.0)
+    path = path + np.column_stack(
+        [np.zeros(len(path)), wiggle * np.sin(np.arange(len(path)) * np.pi / 60.0)]
+    )
+    rec = match(path, route)
+    assert rec.accepted, rec.verdict
+    p = Params().pseudo
+    cross2 = np.linalg.eigvalsh(rec.obs_cov)[0]
+    expected = max(p.cross_sigma_m, p.cross_residual_factor * rec.residual_m)
+    assert np.sqrt(cross2) == pytest.approx(expected, rel=1e-9)
+    assert (expected > p.cross_sigma_m) == (wiggle > 0.1)
 
 
 def test_geometry_covariance_rotates_with_the_road():
