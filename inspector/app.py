@@ -22,7 +22,7 @@ from estimator.errors import RoutefuseError
 from estimator.params import ParamSpec, get_param, param_specs, params_to_toml
 from estimator.results import GateDecision, MatchRecord
 
-from .controller import Controller, Playhead, Session
+from .controller import Controller, Playhead, Session, format_outages, parse_outages
 from .layers import LAYER_TYPES, SceneLayers
 from .plots import metrics_markdown
 
@@ -42,6 +42,10 @@ GROUP_TITLES = {
     "general": "general",
 }
 _NONE = "(none)"
+OUTAGE_LABEL = "GNSS outages (s)"
+OUTAGE_EDIT_QUIET_S = 1.0
+"""the outage field applies its text once typing has rested this long: viser sends every
+keystroke, and '3', '30', '30:' on the way to '30:60' are not outages the user meant"""
 
 
 def _fmt(v: Any, digits: int = 3) -> str:
@@ -126,6 +130,8 @@ def status_markdown(s: Session) -> str:
         f"{tl.n_frames} frames, {len(tl.match_t)} match attempts "
         f"({int((~tl.match_accepted).sum())} rejected)"
     )
+    if s.outages:
+        text += f" · GNSS removed {format_outages(s.outages)} s"
     off = s.off_route.summary() if s.off_route is not None else ""
     return f"{text} · {off}" if off else text
 
@@ -143,6 +149,8 @@ class ClientView:
         self._shown_match: tuple[int, int | None] | None = None
         self._plot_t: float | None = None
         self._param_widgets: dict[str, viser.GuiInputHandle[Any]] = {}
+        self._outage_edits = 0
+        self._outage_timer: threading.Timer | None = None
         self._camera_placed = False
         self.layers = SceneLayers(client.scene)
         self._camera_pending = False
@@ -199,6 +207,14 @@ class ClientView:
                 "method", ("proposed", "paper"), initial_value=self.app.controller.method
             )
             self.method.on_update(self._on_method)
+            self.outage_field = gui.add_text(
+                OUTAGE_LABEL,
+                format_outages(self.app.controller.outages),
+                hint="remove GNSS between START and END seconds after the log start, as "
+                "'routefuse run --outage START:END': e.g. 30:60, 90:120 (empty: none). "
+                "Applied when you stop typing; opening another log clears them.",
+            )
+            self.outage_field.on_update(self._on_outages)
             reset = gui.add_button("reset to defaults")
             reset.on_click(lambda e: self._guard(self.app.controller.reset_params))
             save = gui.add_button("save parameters")
@@ -374,6 +390,38 @@ class ClientView:
             return
         self._guard(lambda: self.app.controller.set_method(self.method.value))
 
+    def _on_outages(self, event: viser.GuiEvent) -> None:
+        """Restart the quiet-period timer: the text is applied once the typing rests."""
+        if event.client is None:
+            return
+        with self._lock:
+            self._outage_edits += 1
+            if self._outage_timer is not None:
+                self._outage_timer.cancel()
+            timer = threading.Timer(
+                OUTAGE_EDIT_QUIET_S, self._commit_outages, args=(self._outage_edits,)
+            )
+            timer.daemon = True
+            self._outage_timer = timer
+        timer.start()
+
+    def _commit_outages(self, edit: int) -> None:
+        with self._lock:
+            if edit != self._outage_edits:
+                return  # typed again since
+            self._outage_timer = None
+            text = str(self.outage_field.value)
+        try:
+            self.app.controller.set_outages(parse_outages(text))
+        except RoutefuseError as exc:
+            kept = format_outages(self.app.controller.outages) or "none"
+            self.client.add_notification(
+                "GNSS outages not changed",
+                f"{exc} (kept: {kept})",
+                color="red",
+                auto_close_seconds=12.0,
+            )
+
     def _on_save(self, event: viser.GuiEvent) -> None:
         text = params_to_toml(self.app.controller.params)
         self.client.send_file_download(
@@ -392,7 +440,15 @@ class ClientView:
         if _NONE in (log, route):
             self.notify_error(RoutefuseError(None, "choose a log and a route first"))
             return
-        self._guard(lambda: self.app.controller.open_named(log, route))
+        controller = self.app.controller
+        before = controller.outages
+        self._guard(lambda: controller.open_named(log, route))
+        if before and not controller.outages:
+            self.client.add_notification(
+                "GNSS outages cleared",
+                f"{format_outages(before)} s were times in the previous log",
+                auto_close_seconds=6.0,
+            )
 
     def _uploader(self, kind: str) -> Callable[[viser.GuiEvent], None]:
         def on_upload(event: viser.GuiEvent) -> None:
@@ -607,6 +663,20 @@ class ClientView:
                 pass
         if self.method.value != self.app.controller.method:
             self.method.value = self.app.controller.method
+        self.sync_outages()
+
+    def sync_outages(self) -> None:
+        """Show the outages in effect, unless this tab is typing in the field (its text is
+        applied, or refused, when the typing rests)."""
+        if self._outage_timer is not None:
+            return
+        wanted = self.app.controller.outages
+        try:
+            shown = parse_outages(str(self.outage_field.value))
+        except RoutefuseError:
+            shown = None
+        if shown != wanted:
+            self.outage_field.value = format_outages(wanted)
 
     def render(self) -> None:
         """Draw the current time: layers, labels, panel, plot markers, camera."""
@@ -689,6 +759,9 @@ class ClientView:
     def close(self) -> None:
         with self._lock:
             self.playhead.playing = False
+            if self._outage_timer is not None:
+                self._outage_timer.cancel()
+                self._outage_timer = None
 
 
 class InspectorApp:

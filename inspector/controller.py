@@ -19,12 +19,13 @@ import traceback
 from collections.abc import Callable, Iterable
 from dataclasses import dataclass, field, replace
 from pathlib import Path
-from typing import Any, Literal
+from typing import Any, Literal, Protocol
 
 import numpy as np
 from numpy.typing import NDArray
 
-from estimator.errors import RoutefuseError
+from estimator.commands._common import parse_outage
+from estimator.errors import ConfigError, RoutefuseError
 from estimator.params import Params, with_values
 from estimator.results import Run
 
@@ -34,6 +35,8 @@ F64 = NDArray[np.float64]
 
 ProposedMethod = Literal["proposed", "paper"]
 Kind = Literal["log", "route"]
+Outages = tuple[tuple[float, float], ...]
+"""injected GNSS outages: (start, end) seconds after the log start, as ``--outage START:END``"""
 
 LOG_SUFFIXES = (".mcap", ".bag", ".db3")
 ROUTE_SUFFIXES = (".geojson", ".gpx", ".kml", ".csv")
@@ -283,6 +286,37 @@ class Playhead:
 
 
 # ---------------------------------------------------------------------------------------------
+# Injected GNSS outages
+
+
+def parse_outages(text: str) -> Outages:
+    """Outages typed as ``30:60, 90:120`` (each part read by the ``--outage`` parser, so the
+    command line and the UI accept the same values); empty text means none."""
+    parts = [p.strip() for p in text.split(",")]
+    try:
+        return normalise_outages(parse_outage(p) for p in parts if p)
+    except ConfigError as exc:
+        raise ConfigError("GNSS outages", exc.problem) from None
+
+
+def normalise_outages(outages: Iterable[tuple[float, float]]) -> Outages:
+    """Sorted float pairs, checked: the same outages typed in another order are the same
+    request, so they do not re-run."""
+    out = []
+    for a, b in outages:
+        a, b = float(a), float(b)
+        if not (np.isfinite(a) and np.isfinite(b)) or not b > a:
+            raise ConfigError("GNSS outages", f"{a:g}:{b:g}: END must be after START")
+        out.append((a, b))
+    return tuple(sorted(set(out)))
+
+
+def format_outages(outages: Outages) -> str:
+    """The text :func:`parse_outages` reads back (``30:60, 90:120``)."""
+    return ", ".join(f"{a:g}:{b:g}" for a, b in outages)
+
+
+# ---------------------------------------------------------------------------------------------
 # The session and the worker
 
 
@@ -299,6 +333,8 @@ class Session:
     """:class:`estimator.inputs.Inputs` (log, route, frame)"""
     params: Params
     method: ProposedMethod
+    outages: Outages
+    """the GNSS outages injected into both runs"""
     baseline: Run
     proposed: Run
     timeline: Timeline
@@ -321,15 +357,18 @@ class _Request:
     route_name: str
     params: Params
     method: ProposedMethod
+    outages: Outages
 
     def same_target(self, other: _Request | Session | None) -> bool:
+        """Would ``other`` show the same runs? (everything a run depends on)"""
         if other is None:
             return False
-        return (self.log_path, self.route_path, self.params, self.method) == (
+        return (self.log_path, self.route_path, self.params, self.method, self.outages) == (
             other.log_path,
             other.route_path,
             other.params,
             other.method,
+            other.outages,
         )
 
 
@@ -348,8 +387,29 @@ def _default_open(log_path: Path, route_path: Path, progress: ProgressListener) 
     return open_inputs(log_path, route_path, progress=progress)
 
 
+class RunFn(Protocol):
+    """How the worker runs one method (:func:`estimator.runner.run` unless a test fakes it)."""
+
+    def __call__(
+        self,
+        inputs: Any,
+        params: Params,
+        method: str,
+        progress: ProgressListener,
+        reuse: Run | None,
+        *,
+        outages: Outages,
+    ) -> Run: ...
+
+
 def _default_run(
-    inputs: Any, params: Params, method: str, progress: ProgressListener, reuse: Run | None
+    inputs: Any,
+    params: Params,
+    method: str,
+    progress: ProgressListener,
+    reuse: Run | None,
+    *,
+    outages: Outages,
 ) -> Run:
     from estimator.runner import run
 
@@ -359,6 +419,7 @@ def _default_run(
         params,
         method=method,  # type: ignore[arg-type]
         frame=inputs.frame,
+        outages=outages,
         progress=progress,
         reuse=reuse,
     )
@@ -381,7 +442,7 @@ class Controller:
         params: Params | None = None,
         method: ProposedMethod = "proposed",
         opener: Callable[[Path, Path, ProgressListener], Any] = _default_open,
-        runner: Callable[[Any, Params, str, ProgressListener, Run | None], Run] = _default_run,
+        runner: RunFn = _default_run,
     ) -> None:
         self.uploads = uploads
         self._folders = folders.with_root(uploads.path) if uploads else folders
@@ -389,6 +450,7 @@ class Controller:
         self._runner = runner
         self._initial_params = params or Params()
         self._initial_method: ProposedMethod = method
+        self._initial_outages: Outages = ()
         self._cond = threading.Condition()
         self._wanted: _Request | None = None
         self._done_version = 0
@@ -427,6 +489,14 @@ class Controller:
             if self._wanted is not None:
                 return self._wanted.method
         return self._session.method if self._session else self._initial_method
+
+    @property
+    def outages(self) -> Outages:
+        """The injected GNSS outages of the latest request (what the outage field shows)."""
+        with self._cond:
+            if self._wanted is not None:
+                return self._wanted.outages
+        return self._session.outages if self._session else self._initial_outages
 
     @property
     def busy(self) -> bool:
@@ -482,13 +552,28 @@ class Controller:
         *,
         log_name: str | None = None,
         route_name: str | None = None,
+        outages: Iterable[tuple[float, float]] | None = None,
     ) -> None:
-        """Open files by path (the CLI's arguments; the UI goes through :meth:`open_named`)."""
+        """Open files by path (the CLI's arguments; the UI goes through :meth:`open_named`).
+
+        Outages are times in one log, so another log starts with none unless ``outages`` says
+        otherwise; the same log with another route keeps them (the tunnel test goes on)."""
+        log_path = Path(log_path).resolve()
+        if outages is not None:
+            kept = normalise_outages(outages)
+        else:
+            with self._cond:
+                current = self._wanted or self._session
+                if current is None:  # typed before anything was loaded: for this log
+                    kept = self._initial_outages
+                else:
+                    kept = current.outages if current.log_path == log_path else ()
         self._request(
-            log_path=Path(log_path).resolve(),
+            log_path=log_path,
             route_path=Path(route_path).resolve(),
-            log_name=log_name or Path(log_path).name,
+            log_name=log_name or log_path.name,
             route_name=route_name or Path(route_path).name,
+            outages=kept,
         )
 
     def save_upload(self, filename: str, content: bytes) -> str:
@@ -516,6 +601,11 @@ class Controller:
     def set_method(self, method: ProposedMethod) -> None:
         self._request(method=method)
 
+    def set_outages(self, outages: Iterable[tuple[float, float]]) -> None:
+        """Inject GNSS outages into the loaded log (checked at once; a start after the end of
+        the log is reported by the worker, which knows the log's length)."""
+        self._request(outages=normalise_outages(outages))
+
     def _request(self, **changes: Any) -> None:
         with self._cond:
             base = self._wanted or self._session
@@ -526,8 +616,14 @@ class Controller:
                         self._initial_params = changes["params"]
                     if "method" in changes:
                         self._initial_method = changes["method"]
+                    if "outages" in changes:
+                        self._initial_outages = changes["outages"]
                     return
-                fields_ = {"params": self._initial_params, "method": self._initial_method}
+                fields_ = {
+                    "params": self._initial_params,
+                    "method": self._initial_method,
+                    "outages": self._initial_outages,
+                }
             else:
                 fields_ = {
                     k: getattr(base, k)
@@ -538,6 +634,7 @@ class Controller:
                         "route_name",
                         "params",
                         "method",
+                        "outages",
                     )
                 }
             fields_.update(changes)
@@ -652,8 +749,19 @@ class Controller:
         timings["open_s"] = time.perf_counter() - t_start
         if self._superseded(req):
             raise Superseded
+        for a, b in req.outages:
+            if a >= inputs.log.duration_s:
+                raise ConfigError(
+                    "GNSS outages",
+                    f"{a:g}:{b:g} starts after the log ends ({inputs.log.duration_s:.1f} s)",
+                )
 
-        same_inputs = prev is not None and (prev.log_path, prev.route_path) == key
+        # a previous run is reused only on the same log and outages (the runner re-checks)
+        same_inputs = (
+            prev is not None
+            and (prev.log_path, prev.route_path) == key
+            and prev.outages == req.outages
+        )
         t1 = time.perf_counter()
         base_reuse = prev.baseline if same_inputs and prev else None
         if base_reuse is not None and base_reuse.params == req.params:
@@ -661,13 +769,17 @@ class Controller:
         else:
             report = stage(0.5, 0.7, "baseline run")
             report(0.0)
-            baseline = self._runner(inputs, req.params, "baseline", report, base_reuse)
+            baseline = self._runner(
+                inputs, req.params, "baseline", report, base_reuse, outages=req.outages
+            )
         timings["baseline_s"] = time.perf_counter() - t1
         t2 = time.perf_counter()
         prop_reuse = prev.proposed if same_inputs and prev and prev.method == req.method else None
         report = stage(0.7, 0.95, f"{req.method} run")
         report(0.0)
-        proposed = self._runner(inputs, req.params, req.method, report, prop_reuse)
+        proposed = self._runner(
+            inputs, req.params, req.method, report, prop_reuse, outages=req.outages
+        )
         timings["proposed_s"] = time.perf_counter() - t2
         if self._superseded(req):
             raise Superseded
@@ -693,6 +805,7 @@ class Controller:
             inputs=inputs,
             params=req.params,
             method=req.method,
+            outages=req.outages,
             baseline=baseline,
             proposed=proposed,
             timeline=Timeline.of_run(proposed),

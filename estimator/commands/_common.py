@@ -6,6 +6,7 @@ from __future__ import annotations
 import argparse
 from typing import Any
 
+from ..errors import ConfigError
 from ..params import Params, load_params, param_specs, parse_assignments, with_values
 
 
@@ -59,3 +60,26 @@ def add_topic_options(parser: argparse.ArgumentParser) -> None:
             default=None,
             help=f"topic to read the {kind} stream from",
         )
+
+
+def add_outage_option(parser: argparse.ArgumentParser) -> None:
+    """``--outage START:END`` (repeatable), read with :func:`parse_outage`."""
+    parser.add_argument(
+        "--outage",
+        metavar="START:END",
+        action="append",
+        default=[],
+        help="remove GNSS between START and END seconds after the log start (repeatable)",
+    )
+
+
+def parse_outage(text: str) -> tuple[float, float]:
+    """``START:END`` in seconds after the log start (a bad value is a one-line
+    :class:`ConfigError`, so the CLI and the inspector report it alike)."""
+    try:
+        a, b = (float(x) for x in text.split(":"))
+    except ValueError:
+        raise ConfigError("--outage", f"{text!r} is not START:END in seconds") from None
+    if not b > a:
+        raise ConfigError("--outage", f"{text!r}: END must be after START")
+    return a, b

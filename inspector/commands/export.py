@@ -8,7 +8,13 @@ import sys
 from pathlib import Path
 
 from estimator.bagio import TopicChoice
-from estimator.commands._common import add_param_options, add_topic_options, params_from_args
+from estimator.commands._common import (
+    add_outage_option,
+    add_param_options,
+    add_topic_options,
+    params_from_args,
+    parse_outage,
+)
 from estimator.errors import ConfigError, RoutefuseError
 
 NAME = "export"
@@ -41,13 +47,7 @@ def add_arguments(parser: argparse.ArgumentParser) -> None:
         default="proposed",
         help="method compared against the baseline (default proposed)",
     )
-    parser.add_argument(
-        "--outage",
-        metavar="START:END",
-        action="append",
-        default=[],
-        help="remove GNSS between START and END seconds after the log start (repeatable)",
-    )
+    add_outage_option(parser)
     parser.add_argument(
         "--fps",
         type=float,
@@ -66,17 +66,6 @@ def add_arguments(parser: argparse.ArgumentParser) -> None:
     )
     add_param_options(parser)
     add_topic_options(parser)
-
-
-def parse_outage(text: str) -> tuple[float, float]:
-    """``START:END`` in seconds after the log start."""
-    try:
-        a, b = (float(x) for x in text.split(":"))
-    except ValueError:
-        raise ConfigError("--outage", f"{text!r} is not START:END in seconds") from None
-    if not b > a:
-        raise ConfigError("--outage", f"{text!r}: END must be after START")
-    return a, b
 
 
 class _Progress:

@@ -5,15 +5,22 @@ from __future__ import annotations
 import argparse
 import sys
 import time
+from collections.abc import Sequence
 from pathlib import Path
 
-from estimator.commands._common import add_param_options, params_from_args
+from estimator.commands._common import (
+    add_outage_option,
+    add_param_options,
+    params_from_args,
+    parse_outage,
+)
 from estimator.errors import RoutefuseError
 
 NAME = "serve"
 HELP = (
     "open a log and its route in the browser inspector: step the estimator, scrub, debug "
-    "every match attempt, tune parameters live"
+    "every match attempt, tune parameters live; --outage (or the GNSS outages field) removes "
+    "GNSS from an open-sky log to make it a tunnel test"
 )
 
 SAMPLE_LOGS = Path(__file__).resolve().parents[2] / "sample_logs"
@@ -54,6 +61,7 @@ def add_arguments(parser: argparse.ArgumentParser) -> None:
         default="proposed",
         help="method compared against the baseline (default proposed)",
     )
+    add_outage_option(parser)
     add_param_options(parser)
 
 
@@ -105,11 +113,13 @@ def start(
     route: Path | None = None,
     params=None,
     method="proposed",
+    outages: Sequence[tuple[float, float]] = (),
     max_upload_bytes: int = 100 * 1024 * 1024,
     verbose: bool = False,
 ):
     """Start the server and the controller (returns ``(server, controller, app)``; used by the
-    command and by the tests)."""
+    command and by the tests). ``outages`` are injected into the first log only: they are
+    times in that log."""
     import viser
 
     from ..app import InspectorApp
@@ -133,6 +143,7 @@ def start(
             route,
             log_name=_listed_name(controller, log, "log"),
             route_name=_listed_name(controller, route, "route"),
+            outages=outages,
         )
     return server, controller, app
 
@@ -147,7 +158,10 @@ def _listed_name(controller, path: Path, kind: str) -> str:
 
 
 def execute(args: argparse.Namespace) -> int:
+    from ..controller import format_outages
+
     params = params_from_args(args)
+    outages = tuple(parse_outage(o) for o in args.outage)
     log, route = resolve_inputs(args.log, args.route)
     if args.host not in ("127.0.0.1", "localhost", "::1"):
         print(
@@ -163,11 +177,13 @@ def execute(args: argparse.Namespace) -> int:
         route=route,
         params=params,
         method=args.method,
+        outages=outages,
         max_upload_bytes=int(args.max_upload_mb * 1e6),
     )
     shown = "127.0.0.1" if args.host in ("0.0.0.0", "::") else args.host
     print(f"routefuse inspector: http://{shown}:{server.get_port()}  (Ctrl+C to stop)", flush=True)
-    print(f"loading {log.name} with route {route.name} ...", flush=True)
+    injected = f" and GNSS outages {format_outages(controller.outages)} s" if outages else ""
+    print(f"loading {log.name} with route {route.name}{injected} ...", flush=True)
 
     def loaded(session) -> None:
         tl = session.timeline

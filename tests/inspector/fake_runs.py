@@ -109,7 +109,7 @@ def fake_open(log_path, route_path, progress):
     return FakeInputs(log=None, route=make_route(), frame=LocalFrame(45.0, 7.0))
 
 
-def fake_run(inputs, params, method, progress, reuse):
+def fake_run(inputs, params, method, progress, reuse, *, outages=()):
     progress(0.5, "running")
     drift = 30.0 if method == "baseline" else params.gates.max_residual_m
     return make_run(drift=drift, method=method, params=params)

@@ -146,14 +146,14 @@ def test_latest_parameter_request_wins(tmp_path):
     calls: list[float] = []
     release = threading.Event()
 
-    def slow_run(inputs, params, method, progress, reuse):
+    def slow_run(inputs, params, method, progress, reuse, **kw):
         calls.append(params.gates.max_residual_m)
         for _ in range(50):
             progress(0.5)  # a superseded run stops here
             if release.is_set():
                 break
             time.sleep(0.01)
-        return fake_run(inputs, params, method, progress, reuse)
+        return fake_run(inputs, params, method, progress, reuse, **kw)
 
     c = Controller(DataFolders.of(_data(tmp_path)), opener=fake_open, runner=slow_run)
     try:
@@ -185,9 +185,9 @@ def test_latest_parameter_request_wins(tmp_path):
 def test_same_parameters_do_not_rerun(tmp_path):
     runs: list[str] = []
 
-    def counting_run(inputs, params, method, progress, reuse):
+    def counting_run(inputs, params, method, progress, reuse, **kw):
         runs.append(method)
-        return fake_run(inputs, params, method, progress, reuse)
+        return fake_run(inputs, params, method, progress, reuse, **kw)
 
     c = Controller(DataFolders.of(_data(tmp_path)), opener=fake_open, runner=counting_run)
     try:
@@ -241,5 +241,154 @@ def test_real_sample_loads_and_a_gate_change_reruns_only_what_changed():
         assert s2.inputs is s.inputs  # the log was not read again
         assert not s2.timeline.match_accepted.any()
         assert s2.timeline.t[0] == s.timeline.t[0]  # same clock: tabs keep their time
+    finally:
+        c.close()
+
+
+# -- injected GNSS outages ----------------------------------------------------------------------
+
+
+def test_outage_text_reads_like_the_outage_option_and_writes_back():
+    from inspector.controller import format_outages, parse_outages
+
+    assert parse_outages("") == parse_outages("  ,  ") == ()
+    assert parse_outages("90:120, 30:60") == ((30.0, 60.0), (90.0, 120.0))  # sorted
+    assert parse_outages("30:60,30:60, 12.5:20") == ((12.5, 20.0), (30.0, 60.0))
+    assert format_outages(((12.5, 20.0), (30.0, 60.0))) == "12.5:20, 30:60"
+    assert parse_outages(format_outages(((12.5, 20.0), (30.0, 60.0)))) == (
+        (12.5, 20.0),
+        (30.0, 60.0),
+    )
+    for bad, why in (
+        ("30", "is not START:END"),
+        ("30:", "is not START:END"),
+        ("30-60", "is not START:END"),
+        ("30:60, 90", "is not START:END"),
+        ("60:30", "END must be after START"),
+        ("30:30", "END must be after START"),
+        ("30:nan", "END must be after START"),
+        ("30:inf", "END must be after START"),
+    ):
+        with pytest.raises(ConfigError, match=why) as info:
+            parse_outages(bad)
+        assert str(info.value).startswith("GNSS outages: ") and "\n" not in str(info.value)
+
+
+class _Log:
+    """Just what the controller and the views read of a log without truth or GNSS."""
+
+    duration_s = 100.0
+    truth = None
+
+    class gnss:
+        t = np.empty(0)
+
+
+def _open_with_log(log_path, route_path, progress):
+    inputs = fake_open(log_path, route_path, progress)
+    return type(inputs)(log=_Log(), route=inputs.route, frame=inputs.frame)
+
+
+def _recording_controller(tmp_path: Path, calls: list) -> Controller:
+    def recording_run(inputs, params, method, progress, reuse, *, outages):
+        calls.append((method, outages, reuse))
+        return fake_run(inputs, params, method, progress, reuse, outages=outages)
+
+    return Controller(DataFolders.of(_data(tmp_path)), opener=_open_with_log, runner=recording_run)
+
+
+def test_changing_the_outages_reruns_both_methods_with_them(tmp_path):
+    calls: list = []
+    c = _recording_controller(tmp_path, calls)
+    try:
+        c.open_named("data/drive.mcap", "data/drive.route.geojson")
+        assert c.wait_idle(10)
+        first = c.session
+        assert first.outages == () and c.outages == ()
+        assert [(m, o) for m, o, _ in calls] == [("baseline", ()), ("proposed", ())]
+        calls.clear()
+        c.set_outages([(90.0, 95.0), (20.0, 50.0)])
+        assert c.outages == ((20.0, 50.0), (90.0, 95.0))  # at once, before the run
+        assert c.wait_idle(10)
+        s = c.session
+        assert s is not first and s.outages == ((20.0, 50.0), (90.0, 95.0))
+        assert s.inputs is first.inputs  # the log was not read again
+        assert [(m, o) for m, o, _ in calls] == [
+            ("baseline", s.outages),
+            ("proposed", s.outages),
+        ]
+        # runs without these outages are not resumed (a baseline would be taken as it was)
+        assert all(reuse is None for _, _, reuse in calls)
+        calls.clear()
+        c.set_outages([(20.0, 50.0), (90.0, 95.0)])  # the same, in another order
+        assert c.wait_idle(10) and calls == [] and c.session is s
+        c.set_param("gates.max_residual_m", 4.0)  # a parameter change keeps the outages
+        assert c.wait_idle(10) and c.session.outages == s.outages
+        assert {o for _, o, _ in calls} == {s.outages}
+        calls.clear()
+        c.set_outages(())
+        assert c.wait_idle(10) and c.session.outages == ()
+        assert [m for m, _, _ in calls] == ["baseline", "proposed"]
+    finally:
+        c.close()
+
+
+def test_invalid_outages_are_refused_and_keep_the_session(tmp_path):
+    errors: list[RoutefuseError] = []
+    calls: list = []
+    c = _recording_controller(tmp_path, calls)
+    try:
+        c.subscribe(on_error=errors.append)
+        c.open(tmp_path / "data/drive.mcap", tmp_path / "data/drive.route.geojson")
+        assert c.wait_idle(10)
+        c.set_outages([(20.0, 50.0)])
+        assert c.wait_idle(10)
+        s = c.session
+        with pytest.raises(ConfigError, match="END must be after START"):
+            c.set_outages([(50.0, 20.0)])
+        assert c.outages == s.outages and not c.busy
+        calls.clear()
+        c.set_outages([(20.0, 50.0), (150.0, 160.0)])  # the log is 100 s long
+        assert c.wait_idle(10)
+        assert c.session is s and c.outages == ((20.0, 50.0),)
+        assert calls == []  # refused before any run
+        assert len(errors) == 1
+        assert str(errors[0]) == "GNSS outages: 150:160 starts after the log ends (100.0 s)"
+    finally:
+        c.close()
+
+
+def test_another_log_clears_the_outages_and_another_route_keeps_them(tmp_path):
+    calls: list = []
+    c = _recording_controller(tmp_path, calls)
+    try:
+        c.open_named("data/drive.mcap", "data/drive.route.geojson")
+        c.set_outages([(20.0, 50.0)])
+        assert c.wait_idle(10) and c.session.outages == ((20.0, 50.0),)
+        c.open_named("data/drive.mcap", "data/sub/old.gpx")  # same log, another route
+        assert c.wait_idle(10)
+        assert c.session.route_name == "data/sub/old.gpx"
+        assert c.session.outages == ((20.0, 50.0),)
+        c.open_named("data/sub/old.bag", "data/sub/old.gpx")  # times of another log
+        assert c.outages == ()
+        assert c.wait_idle(10) and c.session.outages == ()
+        assert calls[-1][:2] == ("proposed", ())
+        c.open(
+            tmp_path / "data/drive.mcap", tmp_path / "data/drive.route.geojson", outages=[(5, 9)]
+        )
+        assert c.wait_idle(10) and c.session.outages == ((5.0, 9.0),)
+    finally:
+        c.close()
+
+
+def test_outages_set_before_anything_is_loaded_apply_to_the_first_log(tmp_path):
+    calls: list = []
+    c = _recording_controller(tmp_path, calls)
+    try:
+        c.set_outages([(20.0, 50.0)])
+        assert c.outages == ((20.0, 50.0),) and c.session is None and not c.busy
+        c.open_named("data/drive.mcap", "data/drive.route.geojson")
+        assert c.wait_idle(10) and c.session.outages == ((20.0, 50.0),)
+        assert {o for _, o, _ in calls} == {((20.0, 50.0),)}
     finally:
         c.close()

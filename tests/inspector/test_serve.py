@@ -72,3 +72,83 @@ def test_execute_warns_on_a_public_host_and_prints_the_url(tmp_path, capsys):
     assert f"http://127.0.0.1:{port}" in out
     assert "warning: binding 0.0.0.0" in err
     assert "routefuse: error:" in err and "drive.mcap" in err  # reported; the server stayed up
+
+
+def test_a_bad_outage_fails_like_export_before_the_server_starts(tmp_path, capsys, monkeypatch):
+    from inspector.cli import main
+
+    started: list = []
+    monkeypatch.setattr(serve, "start", lambda **kw: started.append(kw))
+    for bad in ("60:30", "abc", "30-60"):
+        assert main(["serve", "--outage", "10:20", "--outage", bad]) == 2
+        serve_err = capsys.readouterr().err
+        out = str(tmp_path / "out")
+        assert (
+            main(["export", "x.mcap", "--route", "r.geojson", "--out", out, "--outage", bad]) == 2
+        )
+        export_err = capsys.readouterr().err
+        assert serve_err == export_err  # the same parser, the same one line
+        assert serve_err.startswith("routefuse: error: --outage: ")
+        assert serve_err.count("\n") == 1 and "Traceback" not in serve_err
+    assert started == []
+
+
+def test_outages_reach_the_server_and_the_status_line(tmp_path, capsys, monkeypatch):
+    log = tmp_path / "drive.mcap"
+    log.write_bytes(b"x")
+    (tmp_path / "drive.route.geojson").write_text("{}")
+    started: list = []
+
+    def fake_start(**kw):
+        started.append(kw)
+        raise RoutefuseError(None, "stop here")
+
+    monkeypatch.setattr(serve, "start", fake_start)
+    args = build_parser().parse_args(
+        ["serve", str(log), "--outage", "90:120", "--outage", "30:60.5"]
+    )
+    with pytest.raises(RoutefuseError, match="stop here"):
+        serve.execute(args)
+    assert started[0]["outages"] == ((90.0, 120.0), (30.0, 60.5))
+    assert started[0]["log"] == log.resolve()
+
+
+SAMPLE = serve.SAMPLE_LOGS / "long_tunnel.mcap"
+
+
+@pytest.mark.slow
+def test_serve_injects_the_outages_into_the_first_session_only():
+    """The long_tunnel sample has open sky for its first 100 s: an outage there brings match
+    attempts where the natural log has none; the outages do not follow to another log."""
+    if not SAMPLE.exists():
+        pytest.skip("sample_logs/long_tunnel.mcap is not generated yet")
+    from inspector.app import status_markdown
+
+    log, route = serve.resolve_inputs(None, None)
+    server, controller, app = serve.start(
+        host="127.0.0.1",
+        port=_free_port(),
+        data_dirs=[],
+        log=log,
+        route=route,
+        outages=((20.0, 80.0),),
+    )
+    try:
+        assert controller.wait_idle(300)
+        s = controller.session
+        assert s is not None and s.outages == ((20.0, 80.0),)
+        t = s.timeline.match_t
+        inside = t[(t >= 20.0) & (t <= 80.0)]
+        assert len(inside) > 0  # attempts in what was open sky
+        a, b = s.proposed.degraded_intervals[0]
+        assert (a - s.proposed.t0, b - s.proposed.t0) == pytest.approx((20.0, 80.0), abs=0.5)
+        assert s.baseline.degraded_intervals == s.proposed.degraded_intervals
+        assert "GNSS removed 20:80 s" in status_markdown(s)
+        controller.open_named(
+            "sample_logs/multi_tunnel.mcap", "sample_logs/multi_tunnel.route.geojson"
+        )
+        assert controller.outages == ()
+    finally:
+        app.close()
+        controller.close()
+        server.stop()
