@@ -844,6 +844,12 @@ What the method does here:
   corners): with them almost no match is accepted and the proposed method is the baseline.
   The config shortens the window and widens the heading, rotation and lane-jump gates; that is
   a per-log setting for a slow robot, explained in the file.
+- The **pseudo-position sigma** is the earlier fixed 1 m (`pseudo.cross_sigma_m = 1`,
+  `pseudo.cross_residual_factor = 1`). The default grows the sigma with the registration
+  residual, for map polylines that cut corners; this route is the log's own GNSS, and where it
+  fits the DR track loosely it is wrong, so a looser sigma would only let the innovation gate
+  pass bad matches (measured while choosing it: 159 of 298 attempts accepted instead of 120 of
+  295, the long outages' mean RMSE against the fixes 5.87 instead of 4.00 m).
 """
     if sample is not None:
         sample_table, sample_delta = sample

@@ -54,7 +54,7 @@ def long_tunnel() -> Scenario:
     return Scenario(
         name="long_tunnel",
         description="7.8 km almost straight expressway tunnel at 79 km/h after 103 s of open "
-        "sky with turns; the paper's long-tunnel case (DR drift of 100+ m)",
+        "sky with turns; the paper's long-tunnel case (DR drift of tens of metres)",
         pieces=pieces,
         origin=(40.12, 115.21, 620.0),
         heading0_deg=20.0,
