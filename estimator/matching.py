@@ -27,6 +27,7 @@ from numpy.typing import ArrayLike, NDArray
 
 from .errors import RouteError, RoutefuseError
 from .matching_kernels import (
+    nearest_arc,
     offset_polyline,
     pair_points,
     polyline_arrays,
@@ -34,6 +35,7 @@ from .matching_kernels import (
     rigid_fit,
     rival_score,
     rotation_sigma,
+    scan_offsets,
     segment_index,
     segment_points,
     track_chunks,
@@ -405,98 +407,15 @@ class _Fit:
         return float(np.arctan2(self.rotation[1, 0], self.rotation[0, 0]))
 
 
-@njit(cache=True)
-def _scan_kernel(
-    win: F64, rxy: F64, rs: F64, s_anchor: float, deltas: F64, spacing: float, ms: F64, m: F64
-) -> None:
-    """Mean squared rigid-fit residual of the window against the route at each offset.
-
-    The optimum over SO(2) has tr(R C) = |(C00 + C11, C01 - C10)|, the same value the SVD
-    solution with the reflection guard reaches, so the scan needs no rotation at all.
-    """
-    n = win.shape[0]
-    nseg = rxy.shape[0] - 1
-    length = rs[nseg]
-    ox, oy = win[0, 0], win[0, 1]
-    for k in range(deltas.shape[0]):
-        sw = 0.0
-        sax = say = sbx = sby = 0.0
-        saa = sbb = c00 = c01 = c10 = c11 = 0.0
-        # the segment the walk below reaches for the first point: the number of rs[1:nseg]
-        # at or before it (binary search; walking from 0 costs the route's length per offset)
-        lo, hi = 1, nseg
-        s_first = s_anchor + deltas[k]
-        while lo < hi:
-            mid = (lo + hi) // 2
-            if rs[mid] <= s_first:
-                lo = mid + 1
-            else:
-                hi = mid
-        j = lo - 1
-        for i in range(n):
-            s = s_anchor + deltas[k] + spacing * i
-            if s < -1e-6 or s > length + 1e-6:
-                continue
-            while j < nseg - 1 and rs[j + 1] <= s:
-                j += 1
-            f = (s - rs[j]) / (rs[j + 1] - rs[j])
-            qx = rxy[j, 0] + f * (rxy[j + 1, 0] - rxy[j, 0]) - ox
-            qy = rxy[j, 1] + f * (rxy[j + 1, 1] - rxy[j, 1]) - oy
-            px = win[i, 0] - ox
-            py = win[i, 1] - oy
-            sw += 1.0
-            sax += px
-            say += py
-            sbx += qx
-            sby += qy
-            saa += px * px + py * py
-            sbb += qx * qx + qy * qy
-            c00 += px * qx
-            c01 += px * qy
-            c10 += py * qx
-            c11 += py * qy
-        m[k] = sw
-        if sw < 3:
-            ms[k] = np.inf
-            continue
-        ax, ay, bx, by = sax / sw, say / sw, sbx / sw, sby / sw
-        saa -= sw * (ax * ax + ay * ay)
-        sbb -= sw * (bx * bx + by * by)
-        c00 -= sw * ax * bx
-        c01 -= sw * ax * by
-        c10 -= sw * ay * bx
-        c11 -= sw * ay * by
-        tr = np.hypot(c00 + c11, c01 - c10)
-        ms[k] = max(saa + sbb - 2.0 * tr, 0.0) / sw
-
-
-@njit(cache=True)
-def _nearest_s(rxy: F64, rs: F64, x: float, y: float) -> float:
-    """Arc length of the point of a polyline nearest to (x, y) (small local pieces)."""
-    best, best_s = np.inf, 0.0
-    for j in range(rxy.shape[0] - 1):
-        dx = rxy[j + 1, 0] - rxy[j, 0]
-        dy = rxy[j + 1, 1] - rxy[j, 1]
-        seg = rs[j + 1] - rs[j]
-        f = ((x - rxy[j, 0]) * dx + (y - rxy[j, 1]) * dy) / (seg * seg)
-        f = min(max(f, 0.0), 1.0)
-        ex = rxy[j, 0] + f * dx - x
-        ey = rxy[j, 1] + f * dy - y
-        d = ex * ex + ey * ey
-        if d < best:
-            best, best_s = d, rs[j] + f * seg
-    return best_s
-
-
 def _anchor(piece: Route, point: F64) -> float:
-    return float(_nearest_s(piece.xy, piece.s, float(point[0]), float(point[1])))
+    return float(nearest_arc(piece.xy, piece.s, float(point[0]), float(point[1])))
 
 
 def _scan(win: F64, route: Route, s_anchor: float, deltas: F64, spacing: float) -> tuple[F64, F64]:
     """Mean squared residual and number of valid pairs at each arc-length offset."""
     ms = np.empty(len(deltas))
     m = np.empty(len(deltas))
-    _scan_kernel(
+    scan_offsets(
         np.ascontiguousarray(win),
         route.xy,
         route.s,

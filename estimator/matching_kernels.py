@@ -378,8 +378,8 @@ def track_chunks(
 
 
 @njit(cache=True)
-def _nearest_arc(rxy: F64, rs: F64, x: float, y: float) -> float:
-    """Arc length of the point of a polyline nearest to (x, y) (matching._nearest_s)."""
+def nearest_arc(rxy: F64, rs: F64, x: float, y: float) -> float:
+    """Arc length of the point of a polyline nearest to (x, y) (small local pieces)."""
     best, best_s = np.inf, 0.0
     for j in range(rxy.shape[0] - 1):
         dx = rxy[j + 1, 0] - rxy[j, 0]
@@ -408,7 +408,7 @@ def _scan_grid(
     ms: F64,
     m: F64,
 ) -> None:
-    """The along-track scan (matching._scan_kernel) when the window spacing is ``ratio`` grid
+    """The along-track scan (:func:`scan_offsets`) when the window spacing is ``ratio`` grid
     steps: every pair lies on the grid s0 + step * g, so each route point is interpolated once
     instead of once per offset. Equal to the direct scan to rounding."""
     n = win.shape[0]
@@ -451,18 +451,9 @@ def _scan_grid(
             c10 += py * qx
             c11 += py * qy
         m[k] = sw
-        if sw < 3:
-            ms[k] = np.inf
-            continue
-        ax, ay, bx, by = sax / sw, say / sw, sbx / sw, sby / sw
-        saa -= sw * (ax * ax + ay * ay)
-        sbb -= sw * (bx * bx + by * by)
-        c00 -= sw * ax * bx
-        c01 -= sw * ax * by
-        c10 -= sw * ay * bx
-        c11 -= sw * ay * by
-        tr = np.hypot(c00 + c11, c01 - c10)
-        ms[k] = max(saa + sbb - 2.0 * tr, 0.0) / sw
+        ms[k] = (
+            np.inf if sw < 3 else _rigid_msr(sw, sax, say, sbx, sby, saa, sbb, c00, c01, c10, c11)
+        )
 
 
 @njit(cache=True)
@@ -517,7 +508,7 @@ def rival_score(
     for i in range(pxy.shape[0]):
         if not (np.isfinite(pxy[i, 0]) and np.isfinite(pxy[i, 1])):
             return False
-    s_anchor = _nearest_arc(pxy, ps, win[0, 0], win[0, 1])
+    s_anchor = nearest_arc(pxy, ps, win[0, 0], win[0, 1])
     # --- the along-track scan and its interval (matching._fit)
     nd = deltas.shape[0]
     ms = np.empty(nd)
@@ -533,7 +524,7 @@ def rival_score(
     if grid:
         _scan_grid(win, pxy, ps, punit, s_anchor + deltas[0], step, nd, ratio, ms, m)
     else:
-        _scan_direct(win, pxy, ps, s_anchor, deltas, h, ms, m)
+        scan_offsets(win, pxy, ps, s_anchor, deltas, h, ms, m)
     offset, curvature, sigma = 0.0, 0.0, np.inf
     k = k_center
     if along_search:
@@ -622,10 +613,41 @@ def rival_score(
 
 
 @njit(cache=True)
-def _scan_direct(
+def _rigid_msr(
+    sw: float,
+    sax: float,
+    say: float,
+    sbx: float,
+    sby: float,
+    saa: float,
+    sbb: float,
+    c00: float,
+    c01: float,
+    c10: float,
+    c11: float,
+) -> float:
+    """Mean squared residual of the best 2-D rigid fit of point set a onto b, from their sums
+    (count, coordinate sums, sums of squared norms, cross products C = sum a b^T).
+
+    The optimum over SO(2) has tr(R C) = |(C00 + C11, C01 - C10)| for the centred C, the same
+    value the SVD solution with the reflection guard reaches, so no rotation is formed."""
+    ax, ay, bx, by = sax / sw, say / sw, sbx / sw, sby / sw
+    saa -= sw * (ax * ax + ay * ay)
+    sbb -= sw * (bx * bx + by * by)
+    c00 -= sw * ax * bx
+    c01 -= sw * ax * by
+    c10 -= sw * ay * bx
+    c11 -= sw * ay * by
+    tr = np.hypot(c00 + c11, c01 - c10)
+    return max(saa + sbb - 2.0 * tr, 0.0) / sw
+
+
+@njit(cache=True)
+def scan_offsets(
     win: F64, rxy: F64, rs: F64, s_anchor: float, deltas: F64, spacing: float, ms: F64, m: F64
 ) -> None:
-    """matching._scan_kernel (a copy: that one stays the filter's bit-for-bit reference)."""
+    """Mean squared rigid-fit residual ``ms`` of the window against the route, and the number
+    of pairs ``m``, at each arc-length offset of the route window's start from ``s_anchor``."""
     n = win.shape[0]
     nseg = rxy.shape[0] - 1
     length = rs[nseg]
@@ -658,18 +680,9 @@ def _scan_direct(
             c10 += py * qx
             c11 += py * qy
         m[k] = sw
-        if sw < 3:
-            ms[k] = np.inf
-            continue
-        ax, ay, bx, by = sax / sw, say / sw, sbx / sw, sby / sw
-        saa -= sw * (ax * ax + ay * ay)
-        sbb -= sw * (bx * bx + by * by)
-        c00 -= sw * ax * bx
-        c01 -= sw * ax * by
-        c10 -= sw * ay * bx
-        c11 -= sw * ay * by
-        tr = np.hypot(c00 + c11, c01 - c10)
-        ms[k] = max(saa + sbb - 2.0 * tr, 0.0) / sw
+        ms[k] = (
+            np.inf if sw < 3 else _rigid_msr(sw, sax, say, sbx, sby, saa, sbb, c00, c01, c10, c11)
+        )
 
 
 @njit(cache=True)

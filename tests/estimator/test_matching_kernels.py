@@ -102,7 +102,7 @@ def ref_mahalanobis2(nu, cov) -> float:
 
 @njit(cache=True)
 def _ref_scan_kernel(win, rxy, rs, s_anchor, deltas, spacing, ms, m):
-    """_scan_kernel with its original segment walk from the route's start."""
+    """matching_kernels.scan_offsets with its original segment walk from the route's start."""
     n = win.shape[0]
     nseg = rxy.shape[0] - 1
     length = rs[nseg]
@@ -155,7 +155,7 @@ REFERENCE = {
     "_pairs": ref_pairs,
     "_unit_interval": ref_unit_interval,
     "_mahalanobis2": ref_mahalanobis2,
-    "_scan_kernel": _ref_scan_kernel,
+    "scan_offsets": _ref_scan_kernel,
 }
 
 
@@ -305,7 +305,7 @@ def test_scan_from_a_binary_search_is_the_walk_from_the_start(seed):
     for s_anchor in (-80.0, 0.0, float(rng.uniform(0, route.length)), route.length - 20.0):
         a = (np.empty(len(deltas)), np.empty(len(deltas)))
         b = (np.empty(len(deltas)), np.empty(len(deltas)))
-        matching._scan_kernel(win, route.xy, route.s, s_anchor, deltas, 5.0, *a)
+        matching.scan_offsets(win, route.xy, route.s, s_anchor, deltas, 5.0, *a)
         _ref_scan_kernel(win, route.xy, route.s, s_anchor, deltas, 5.0, *b)
         np.testing.assert_array_equal(a[0], b[0])
         np.testing.assert_array_equal(a[1], b[1])
