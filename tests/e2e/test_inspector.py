@@ -158,7 +158,9 @@ def test_play_and_pause(page):
     _wait(lambda: _frame(pg) > f0 + 20, 20, "playback to advance")
     _click(pg, "pause")
     _wait(lambda: not view.playhead.playing, 5, "the pause")
-    f1 = _frame(pg)
+    # the label may still be catching up with the last frames played: wait for the paused one
+    f1 = view.session.timeline.frame_at(view.playhead.t) + 1
+    _wait(lambda: _frame(pg) == f1, 5, f"the page to show the paused frame {f1}")
     time.sleep(1.0)
     assert _frame(pg) == f1
 
@@ -430,6 +432,50 @@ def test_four_pages_keep_their_time_and_share_a_parameter_change(browser, inspec
         unsubscribe()
         for pg, _ in others:
             pg.close()
+
+
+def test_typing_an_outage_brings_match_attempts_into_open_sky(page, inspector):
+    """The sample has open sky for its first 100 s: typing an outage there, key by key, re-runs
+    both methods and match attempts appear in it; a wrong entry is refused and changes
+    nothing."""
+    pg, _ = page
+    _, controller, _ = inspector
+    before = controller.session
+    assert before.outages == ()
+    t = before.timeline.match_t
+    assert not ((t >= 20.0) & (t <= 80.0)).any(), "the sample already has attempts there"
+    status = _status(pg)
+    assert status
+    pg.get_by_role("tab", name="Parameters").click()
+    # viser gives a text input no id of its own: the input on the label's row
+    field = (
+        pg.locator("label", has_text=re.compile(r"^GNSS outages \(s\)$"))
+        .first.locator("xpath=ancestor::div[contains(@class, 'mantine-Flex-root')][1]//input")
+        .first
+    )
+    try:
+        field.click()
+        # typed like a person (viser sends at most one update per 50 ms, the latest of a burst);
+        # the field applies its text when the typing rests
+        field.press_sequentially("20:80", delay=150)
+        _wait(lambda: controller.outages == ((20.0, 80.0),), 15, "the outages to arrive")
+        assert controller.wait_idle(180)
+        s = controller.session
+        assert s is not before and s.outages == ((20.0, 80.0),)
+        t = s.timeline.match_t
+        assert ((t >= 20.0) & (t <= 80.0)).any(), "no attempt in the injected outage"
+        _wait(lambda: "GNSS removed 20:80 s" in pg.inner_text("body"), 30, "the status line")
+        assert _status(pg) not in ("", status)  # the match count changed
+
+        field.press("End")
+        field.press_sequentially(", 90", delay=150)  # not START:END
+        _wait(lambda: _notified(pg, "GNSS outages not changed"), 15, "the refusal")
+        assert "'90' is not START:END in seconds (kept: 20:80)" in pg.inner_text("body")
+        assert controller.outages == ((20.0, 80.0),)
+        assert controller.wait_idle(30) and controller.session is s
+    finally:
+        controller.set_outages(())  # the tests below expect the natural sample
+        assert controller.wait_idle(180)
 
 
 def _detour_route(route_path: Path, out: Path) -> Path:
