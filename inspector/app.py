@@ -445,8 +445,9 @@ class ClientView:
         self._guard(lambda: controller.open_named(log, route))
         if before and not controller.outages:
             self.client.add_notification(
-                "GNSS outages cleared",
-                f"{format_outages(before)} s were times in the previous log",
+                "GNSS outages not carried over",
+                f"{log} opens without {format_outages(before)} s: those were times in the "
+                "previous log",
                 auto_close_seconds=6.0,
             )
 
