@@ -1,4 +1,4 @@
-"""Strapdown mechanisation and the 16-state error-state EKF, compiled with numba.
+"""Strapdown mechanisation and the error-state EKF, compiled with numba.
 
 Everything the filter carries is a plain float64 array, so a run can stop at any IMU sample, be
 copied (a checkpoint) and resume bit-identically:
@@ -6,9 +6,11 @@ copied (a checkpoint) and resume bit-identically:
 - ``x`` (20): nominal state: position ENU (m), velocity ENU (m/s), attitude quaternion body->ENU
   (w, x, y, z), gyro bias (rad/s), accelerometer bias (m/s^2), wheel-speed scale factor, GNSS
   wander (m, ENU).
-- ``P`` (19, 19): covariance of the error state: attitude (a rotation of the ENU frame, rad),
-  velocity, position, gyro bias, accelerometer bias, wheel scale, GNSS wander. Errors are
-  ``true - estimate`` and the true attitude is ``(I + [phi x]) C_est``.
+- ``P`` (20, 20): covariance of the error state: attitude (a rotation of the ENU frame, rad),
+  velocity, position, gyro bias, accelerometer bias, wheel scale, GNSS wander, and the error of
+  the lane offset the route pseudo-positions keep (a "consider" state: its correlations are
+  tracked, it is never corrected and has no nominal value; see :func:`clone_lane_offset`).
+  Errors are ``true - estimate`` and the true attitude is ``(I + [phi x]) C_est``.
 
 The GNSS wander is the slowly varying part of a receiver's error (first-order Gauss-Markov, tens
 of seconds): modelled as a state, the filter keeps an honest absolute position variance while
@@ -35,7 +37,7 @@ from numba import njit
 # nominal state
 X_POS, X_VEL, X_QUAT, X_BG, X_BA, X_SCALE, X_GW, NX = 0, 3, 6, 10, 13, 16, 17, 20
 # error state
-E_ATT, E_VEL, E_POS, E_BG, E_BA, E_SCALE, E_GW, NE = 0, 3, 6, 9, 12, 15, 16, 19
+E_ATT, E_VEL, E_POS, E_BG, E_BA, E_SCALE, E_GW, E_LANE, NE = 0, 3, 6, 9, 12, 15, 16, 19, 20
 
 # aux: bookkeeping
 A_TIME = 0  # time of the state: the last IMU sample processed
@@ -261,6 +263,7 @@ def _f_times(M, Cb, fn, w, inv_tau_g, inv_tau_a, inv_tau_w, out):
         out[16, c] = -inv_tau_w * M[16, c]
         out[17, c] = -inv_tau_w * M[17, c]
         out[18, c] = -inv_tau_w * M[18, c]
+        out[19, c] = 0.0
 
 
 @njit(cache=True, error_model="numpy")
@@ -378,12 +381,16 @@ def _apply_update(x, P, y, m, PHt, Si, scale_on):
 
 @njit(cache=True, error_model="numpy")
 def _apply(x, P, y, m, PHt, Si, scale_on, K, dx):
+    # the lane-offset error is considered, not estimated (Schmidt): its gain is zero, and as
+    # the last state the symmetric update below then leaves its variance as it was
     for i in range(NE):
         for a in range(m):
             acc = 0.0
             for b in range(m):
                 acc += PHt[i, b] * Si[b, a]
             K[i, a] = acc
+    for a in range(m):
+        K[E_LANE, a] = 0.0
     for i in range(NE):
         for j in range(i, NE):
             acc = 0.0
@@ -657,10 +664,14 @@ def pseudo_position_update(
     cfg: np.ndarray,
     z: np.ndarray,
     R2: np.ndarray,
+    normal: np.ndarray,
 ) -> np.ndarray:
     """The route pseudo-observation of E, N position with covariance ``R2``. Returns
     [innovation E, N, correction E, N]. Also asks the next GNSS fix to widen the position
-    covariance (see :func:`_widen_position`)."""
+    covariance (see :func:`_widen_position`).
+
+    The truth is ``z + normal * (lane-offset error) + noise`` (``normal``: the route's left
+    normal at the match; zero leaves the lane-offset error out)."""
     flush_covariance(P, aux, cfg)
     H = np.zeros((3, NE))
     R = np.zeros((3, 3))
@@ -670,6 +681,7 @@ def pseudo_position_update(
     Si = np.empty((3, 3))
     for a in range(2):
         H[a, E_POS + a] = 1.0
+        H[a, E_LANE] = -normal[a]
         y[a] = z[a] - x[X_POS + a]
         for b in range(2):
             R[a, b] = R2[a, b]
@@ -678,6 +690,26 @@ def pseudo_position_update(
     _apply_update(x, P, y, 2, PHt, Si, cfg[C_SCALE_ON] > 0)
     aux[A_INFLATE] = 1.0
     return np.array([y[0], y[1], x[X_POS] - p0, x[X_POS + 1] - p1])
+
+
+@njit(cache=True, error_model="numpy")
+def clone_lane_offset(P: np.ndarray, aux: np.ndarray, cfg: np.ndarray, normal: np.ndarray) -> None:
+    """Start an outage's lane-offset error as a clone of the cross-track position error.
+
+    The lane offset every pseudo-position of an outage keeps was learned from the estimate while
+    GNSS was good, so it is wrong by the estimate's own cross-track error then (mostly the
+    receiver's slow wander), and all the outage's matches share that error. Treated as
+    independent noise it must either get a metre-level sigma, with which the estimate lags the
+    route, or it makes the position covariance shrink far below the real error. Carried as a
+    state correlated one-to-one with the position error at the outage start, consecutive
+    matches hold the estimate to the route while the absolute cross-track variance stays what
+    GNSS left. ``normal``: the route's left normal at the vehicle."""
+    flush_covariance(P, aux, cfg)
+    for j in range(NE):
+        v = normal[0] * P[E_POS, j] + normal[1] * P[E_POS + 1, j]
+        P[E_LANE, j] = v
+        P[j, E_LANE] = v
+    P[E_LANE, E_LANE] = normal[0] * P[E_LANE, E_POS] + normal[1] * P[E_LANE, E_POS + 1]
 
 
 @njit(cache=True, error_model="numpy")

@@ -921,6 +921,8 @@ def match_geometry(
         "lane_path": float(lane_path),
         "innovation_along_m": float(nu @ fit.tangent),
         "innovation_cross_m": float(nu @ fit.normal),
+        "normal_e": float(fit.normal[0]),
+        "normal_n": float(fit.normal[1]),
         "heading_sigma_rad": _rotation_sigma(win, fit, cov, params),
     }
     d2 = jump = cost = float("nan")

@@ -276,6 +276,12 @@ class ExtensionParams:
         "window.long_length_m window and use it if it passes every gate and observes along-track",
     )
     heading_observation: bool = param(False, "feed the fitted rotation as a heading observation")
+    lane_offset_state: bool = param(
+        True,
+        "carry the learned lane offset's error (shared by all of an outage's matches) as a "
+        "filter state cloned from the cross-track position error at the outage start, so the "
+        "position covariance in a tunnel stays honest",
+    )
     robust_gnss: bool = param(
         True,
         "test each fix against the filter with the typical fix variance and inflate the "

@@ -877,6 +877,8 @@ class _Driver:
                 self.inp.cfg,
                 np.asarray(rec.pseudo_position, float),
                 _applied_obs_cov(rec, self.p),
+                np.array([rec.extra["normal_e"], rec.extra["normal_n"]])
+                * float(self.p.extensions.lane_offset_state),
             )
             innovation, correction = res[:2].copy(), res[2:].copy()
             heading = _heading_observation(rec, self.p)
@@ -929,6 +931,9 @@ class _Driver:
                 if not self.matching:
                     continue
                 self._begin_interval(a, self.out, int(self.idx[ekf.I_OUT]), self.x, self.aux)
+                if self.p.extensions.lane_offset_state and self.track.s is not None:
+                    t = self.route.tangent_at(self.track.s)[0]
+                    ekf.clone_lane_offset(self.P, self.aux, self.inp.cfg, np.array([-t[1], t[0]]))
             while True:
                 t_try = a + tr.min_outage_s + k * tr.interval_s
                 if t_try >= b or t_try > self.inp.imu_t[-1]:
@@ -953,6 +958,7 @@ class _Driver:
         same_trigger = (
             self.p.trigger == old_params.trigger
             and self.p.extensions.heading_observation == old_params.extensions.heading_observation
+            and self.p.extensions.lane_offset_state == old_params.extensions.lane_offset_state
         )
         if not self.matching and not reuse_matching:
             # baseline after baseline: the filter and its inputs are the same, so is the run

@@ -86,7 +86,10 @@ def test_covariance_propagation_equals_dense_phi_p_phi_t_plus_q():
     np.testing.assert_array_equal(got, got.T)
 
 
-def test_pseudo_position_update_is_the_kalman_update():
+@pytest.mark.parametrize("normal", [(0.0, 0.0), (0.6, -0.8)])
+def test_pseudo_position_update_is_the_kalman_update(normal):
+    """The optimal update of every estimated state; the lane-offset error (measured through
+    ``-normal``) is only considered: no gain, its variance unchanged, the Joseph form."""
     rng = np.random.default_rng(3)
     P = _random_cov(rng) * 0.1
     cfg = _config(rng)
@@ -96,22 +99,50 @@ def test_pseudo_position_update_is_the_kalman_update():
     x[ekf.X_SCALE] = 1.0
     z = np.array([11.0, -3.0])
     R = np.array([[2.0, 0.3], [0.3, 0.5]])
+    n = np.array(normal)
     H = np.zeros((2, ekf.NE))
     H[0, ekf.E_POS] = H[1, ekf.E_POS + 1] = 1.0
+    H[:, ekf.E_LANE] = -n
     S = H @ P @ H.T + R
     K = P @ H.T @ np.linalg.inv(S)
+    K[ekf.E_LANE] = 0.0
     y = z - x[:2]
     dx = K @ y
-    P_exp = P - K @ H @ P
+    I_KH = np.eye(ekf.NE) - K @ H
+    P_exp = I_KH @ P @ I_KH.T + K @ R @ K.T
+    lane_var = P[ekf.E_LANE, ekf.E_LANE]
     aux = np.zeros(ekf.NA)
     x0 = x.copy()
-    res = ekf.pseudo_position_update(x, P, aux, cfg, z, R)
+    res = ekf.pseudo_position_update(x, P, aux, cfg, z, R, n)
     np.testing.assert_allclose(res[:2], y)
     np.testing.assert_allclose(res[2:], dx[6:8], rtol=1e-12)
     np.testing.assert_allclose(x[:3] - x0[:3], dx[6:9], rtol=1e-12)
     np.testing.assert_allclose(x[ekf.X_VEL : ekf.X_VEL + 3], dx[3:6], rtol=1e-12, atol=1e-15)
     np.testing.assert_allclose(P, P_exp, rtol=1e-10, atol=1e-12)
+    assert P[ekf.E_LANE, ekf.E_LANE] == lane_var
     assert aux[ekf.A_INFLATE] == 1.0
+
+
+def test_the_lane_offset_error_starts_as_the_cross_track_position_error():
+    rng = np.random.default_rng(5)
+    P = _random_cov(rng)
+    cfg = _config(rng)
+    aux = np.zeros(ekf.NA)
+    n = np.array([-np.sin(0.4), np.cos(0.4)])
+    before = P.copy()
+    ekf.clone_lane_offset(P, aux, cfg, n)
+    pos = slice(ekf.E_POS, ekf.E_POS + 2)
+    row = n @ before[pos]
+    np.testing.assert_allclose(P[ekf.E_LANE, : ekf.E_LANE], row[: ekf.E_LANE], rtol=1e-12)
+    assert P[ekf.E_LANE, ekf.E_LANE] == pytest.approx(n @ before[pos, pos] @ n, rel=1e-12)
+    np.testing.assert_array_equal(P, P.T)
+    np.testing.assert_array_equal(P[: ekf.E_LANE, : ekf.E_LANE], before[: ekf.E_LANE, : ekf.E_LANE])
+    # a clone: the lane-offset error minus the cross-track position error has no variance
+    d = np.zeros(ekf.NE)
+    d[ekf.E_LANE] = 1.0
+    d[pos] = -n
+    assert d @ P @ d == pytest.approx(0.0, abs=1e-12)
+    assert np.linalg.eigvalsh(P).min() > -1e-12
 
 
 def test_attitude_injection_rotates_in_the_navigation_frame():
