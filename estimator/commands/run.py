@@ -5,7 +5,6 @@ from __future__ import annotations
 import argparse
 import csv
 import json
-import math
 import sys
 import time
 from collections.abc import Sequence
@@ -22,7 +21,13 @@ from ..metrics import MethodMetrics, format_table, match_summary, method_metrics
 from ..params import Method
 from ..results import Run
 from ..runner import run
-from ._common import add_param_options, add_topic_options, params_from_args
+from ._common import (
+    add_outage_option,
+    add_param_options,
+    add_topic_options,
+    params_from_args,
+    parse_outage,
+)
 
 NAME = "run"
 HELP = (
@@ -32,19 +37,6 @@ HELP = (
 )
 
 METHODS: tuple[Method, ...] = ("baseline", "proposed", "paper")
-
-
-def _outage(text: str) -> tuple[float, float]:
-    start, sep, end = text.partition(":")
-    try:
-        a, b = float(start), float(end)
-    except ValueError:
-        a = b = math.nan
-    if not sep or not (math.isfinite(a) and math.isfinite(b)) or b <= a:
-        raise argparse.ArgumentTypeError(
-            f"expected START:END seconds after the log start with END > START, got {text!r}"
-        )
-    return a, b
 
 
 def add_arguments(parser: argparse.ArgumentParser) -> None:
@@ -58,14 +50,7 @@ def add_arguments(parser: argparse.ArgumentParser) -> None:
         default=None,
         help="which line of a route file that holds several",
     )
-    parser.add_argument(
-        "--outage",
-        metavar="START:END",
-        type=_outage,
-        action="append",
-        default=[],
-        help="remove GNSS between START and END seconds after the log start (repeatable)",
-    )
+    add_outage_option(parser)
     parser.add_argument(
         "--method",
         nargs="+",
@@ -199,6 +184,7 @@ def results_document(
 
 def execute(args: argparse.Namespace) -> int:
     params = params_from_args(args)
+    outages = [parse_outage(o) for o in args.outage]
     methods: list[Method] = list(dict.fromkeys(args.method or ("baseline", "proposed")))
     progress = _Progress(enabled=not args.quiet)
     inputs = open_inputs(
@@ -210,7 +196,7 @@ def execute(args: argparse.Namespace) -> int:
     )
     log, route, frame = inputs.log, inputs.route, inputs.frame
     assert route is not None
-    for a, b in args.outage:
+    for a, b in outages:
         if a >= log.duration_s:
             raise ConfigError(
                 "--outage", f"{a:g}:{b:g} starts after the log ends ({log.duration_s:.1f} s)"
@@ -224,7 +210,7 @@ def execute(args: argparse.Namespace) -> int:
             params,
             method=method,
             frame=frame,
-            outages=args.outage,
+            outages=outages,
             progress=lambda f, m=method: progress(m, f),
             reuse=previous,
         )
@@ -258,7 +244,7 @@ def execute(args: argparse.Namespace) -> int:
         print(f"routefuse run: warning: {w}", file=sys.stderr)
 
     if args.json is not None:
-        doc = results_document(args.log, args.route, log, runs, metrics, outages=args.outage)
+        doc = results_document(args.log, args.route, log, runs, metrics, outages=outages)
         try:
             args.json.write_text(json.dumps(doc, indent=2) + "\n", encoding="utf-8")
         except OSError as exc:

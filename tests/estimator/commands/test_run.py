@@ -125,10 +125,11 @@ def test_errors_are_one_line(bag, tmp_path, capsys):
     err = capsys.readouterr().err.strip()
     assert err.startswith("routefuse: error:") and "missing.mcap" in err
     assert "\n" not in err
-    with pytest.raises(SystemExit) as exc:
-        main(["run", str(log), "--route", str(route), "--outage", "30:20"])
-    assert exc.value.code == 2
-    assert "END > START" in capsys.readouterr().err
+    assert main(["run", str(log), "--route", str(route), "--outage", "30:20"]) == 2
+    err = capsys.readouterr().err
+    assert "END must be after START" in err and err.count("\n") == 1
+    assert main(["run", str(log), "--route", str(route), "--outage", "30-60"]) == 2
+    assert "'30-60' is not START:END in seconds" in capsys.readouterr().err
     assert main(["run", str(log), "--route", str(route), "--outage", "500:600"]) == 2
     assert "starts after the log ends" in capsys.readouterr().err
     bad = ["run", str(log), "--route", str(route), "--json", str(tmp_path / "no" / "x.json")]
