@@ -133,6 +133,30 @@ def _kabsch(src: F64, dst: F64, w: F64) -> tuple[F64, F64, F64]:
     return rot, trans, ms
 
 
+def _kabsch_one(src: F64, dst: F64, w: F64) -> tuple[F64, F64, float]:
+    """:func:`_kabsch` of one (n, 2) pair of point sets: the same numpy operations in the same
+    order, so the same values bit for bit, without the batch axis's overhead (the matcher fits
+    once per attempt and the run's results were made with these roundings)."""
+    wsum = max(float(w.sum()), 1e-300)
+    w2 = w[:, None]
+    cs = (w2 * src).sum(axis=0) / wsum
+    ct = (w2 * dst).sum(axis=0) / wsum
+    a = src - cs
+    b = dst - ct
+    aw = w2 * a
+    cov = aw.T @ b
+    u, _, vt = np.linalg.svd(cov)
+    v = vt.T.copy()
+    r = v @ u.T
+    if r[0, 0] * r[1, 1] - r[0, 1] * r[1, 0] < 0.0:
+        v[:, 1] *= -1.0
+        r = v @ u.T
+    trans = ct - r @ cs
+    sq = float((aw * a).sum() + (w2 * b * b).sum())
+    tr = float(np.einsum("ij,ji->", r, cov))
+    return r, trans, max(sq - 2.0 * tr, 0.0) / wsum
+
+
 def shifted_route(
     route: Route, lateral_m: float, *, s0: float = 0.0, s1: float | None = None
 ) -> Route:
@@ -444,8 +468,8 @@ def _pairs(
     q = np.empty((n, 2))
     pair_points(w, route.xy, route.s, route._unit, float(s_first), float(spacing), s, valid, q)
     if exact:
-        rot3, trans3, ms = _kabsch(w[None], q[None], valid[None].astype(np.float64))
-        return s, valid, q, rot3[0], trans3[0], float(np.sqrt(ms[0]))
+        rot, trans, ms = _kabsch_one(w, q, valid.astype(np.float64))
+        return s, valid, q, rot, trans, float(np.sqrt(ms))
     rot = np.empty((2, 2))
     trans = np.empty(2)
     residual = rigid_fit(w, q, valid, rot, trans)
