@@ -11,7 +11,9 @@ from __future__ import annotations
 
 import threading
 import time
-from collections.abc import Callable
+import traceback
+from collections.abc import Awaitable, Callable
+from concurrent.futures import Future, ThreadPoolExecutor
 from typing import Any
 
 import numpy as np
@@ -26,6 +28,15 @@ from .controller import Controller, Playhead, Session, format_outages, parse_out
 from .layers import LAYER_TYPES, SceneLayers
 from .plots import metrics_markdown
 
+STEP_BUTTONS = {"« 10": -10, "‹ prev": -1, "next ›": 1, "10 »": 10}
+"""the frame step buttons and how many output frames each moves"""
+MATCH_BUTTONS = {
+    "‹ attempt": "previous",
+    "attempt ›": "next",
+    "‹ rejected": "previous rejected",
+    "rejected ›": "rejected",
+}
+"""the match navigation buttons and the :meth:`ClientView.jump` each makes"""
 SPEEDS = ("0.25x", "0.5x", "1x", "2x", "5x", "10x", "20x", "50x")
 PLAY_RATE_HZ = 15.0
 PANEL_PX = 400.0
@@ -136,6 +147,13 @@ def status_markdown(s: Session) -> str:
     return f"{text} · {off}" if off else text
 
 
+def _report_failure(done: Future[None]) -> None:
+    """Print what a click's action raised (it runs on a worker thread nobody waits on)."""
+    exc = None if done.cancelled() else done.exception()
+    if exc is not None:
+        traceback.print_exception(exc)
+
+
 class ClientView:
     """One browser tab: its GUI, its scene layers and its own playhead."""
 
@@ -154,6 +172,7 @@ class ClientView:
         self._camera_placed = False
         self.layers = SceneLayers(client.scene)
         self._camera_pending = False
+        self._clicks = ThreadPoolExecutor(1, thread_name_prefix="routefuse-clicks")
         client.camera.on_update(self._on_camera)
         self._build()
 
@@ -170,11 +189,19 @@ class ClientView:
         )
         self.time_slider.on_update(self._on_slider)
         self.step_buttons = gui.add_button_group("frame", ("« 10", "‹ prev", "next ›", "10 »"))
-        self.step_buttons.on_click(self._on_step)
-        self.match_buttons = gui.add_button_group(
-            "match", ("‹ attempt", "attempt ›", "‹ rejected", "rejected ›")
+        self.step_buttons.on_click(
+            self._pressed(
+                self.step_buttons,
+                {label: (lambda n=n: self.step(n)) for label, n in STEP_BUTTONS.items()},
+            )
         )
-        self.match_buttons.on_click(self._on_match_nav)
+        self.match_buttons = gui.add_button_group("match", tuple(MATCH_BUTTONS))
+        self.match_buttons.on_click(
+            self._pressed(
+                self.match_buttons,
+                {label: (lambda w=w: self.jump(w)) for label, w in MATCH_BUTTONS.items()},
+            )
+        )
         self.play_button = gui.add_button("play", hint="play / pause (space)")
         self.play_button.on_click(lambda _: self.toggle_play())
         self.speed = gui.add_dropdown("speed", SPEEDS, initial_value="5x")
@@ -343,18 +370,24 @@ class ClientView:
             return
         self.seek(float(self.time_slider.value))
 
-    def _on_step(self, event: viser.GuiEvent) -> None:
-        n = {"« 10": -10, "‹ prev": -1, "next ›": 1, "10 »": 10}[self.step_buttons.value]
-        self.step(n)
+    def _pressed(
+        self, group: viser.GuiButtonGroupHandle, actions: dict[str, Callable[[], None]]
+    ) -> Callable[[viser.GuiEvent], Awaitable[None]]:
+        """A button group's click handler that reads which button was pressed as the click
+        arrives.
 
-    def _on_match_nav(self, event: viser.GuiEvent) -> None:
-        which = {
-            "‹ attempt": "previous",
-            "attempt ›": "next",
-            "‹ rejected": "previous rejected",
-            "rejected ›": "rejected",
-        }[self.match_buttons.value]
-        self.jump(which)
+        viser stores the pressed label on the shared handle, then runs plain callbacks on its
+        thread pool: two quick clicks ("next ›", "10 »") could both be read as the second. A
+        coroutine runs on the event loop before the next message is handled; the action itself
+        goes to this tab's one worker thread, so clicks are applied once each, in order.
+        """
+
+        async def on_click(event: viser.GuiEvent) -> None:
+            action = actions.get(group.value)
+            if action is not None:
+                self._clicks.submit(action).add_done_callback(_report_failure)
+
+        return on_click
 
     def _on_speed(self, event: viser.GuiEvent) -> None:
         self.playhead.speed = float(self.speed.value.rstrip("x"))
@@ -758,6 +791,7 @@ class ClientView:
                 choice.value = keep
 
     def close(self) -> None:
+        self._clicks.shutdown(wait=False, cancel_futures=True)
         with self._lock:
             self.playhead.playing = False
             if self._outage_timer is not None:

@@ -2,6 +2,9 @@
 
 from __future__ import annotations
 
+import asyncio
+import threading
+
 from fake_runs import make_run
 
 from inspector.app import match_markdown
@@ -49,3 +52,66 @@ def test_plot_payloads_carry_their_own_titles_units_and_time_marker():
         assert kw["series"][1]["label"] == f"baseline [{unit}]"
     assert len(titles) == 2
     assert plot.position[0].max() > 20 > plot.position[1].max()  # baseline drifts 30 m
+
+
+def test_two_quick_clicks_step_by_each_button_pressed(tmp_path, monkeypatch):
+    """viser stores a button group's pressed label on the shared handle; two clicks that arrive
+    while its thread pool is busy must still each move by their own button ("next ›" then
+    "10 »": 11 frames, not 20)."""
+    from dataclasses import dataclass
+
+    from viser import _messages
+
+    from estimator.geo import LocalFrame
+    from estimator.route import Route
+    from estimator.simulate import simulate
+    from inspector.app import ClientView, InspectorApp
+    from inspector.bench import _HeadlessTab
+    from inspector.controller import Controller, DataFolders
+    from inspector.export import headless_server
+
+    @dataclass(frozen=True)
+    class Inputs:
+        log: object
+        route: Route
+        frame: LocalFrame
+
+    sim = simulate("short_tunnel", imu_rate_hz=100.0)
+    inputs = Inputs(sim.log(), sim.route(), sim.frame)
+    controller = Controller(DataFolders.of(tmp_path), opener=lambda *_: inputs)
+    try:
+        controller.open(tmp_path / "short.mcap", tmp_path / "short.geojson")
+        assert controller.wait_idle(300) and controller.session is not None
+        with headless_server() as server:
+            app = InspectorApp(server, controller)
+            tab = _HeadlessTab(server)
+            view = ClientView(app, tab)  # type: ignore[arg-type]
+            try:
+                view.set_session(controller.session)
+                tl = controller.session.timeline
+                view.seek(tl.duration / 2)
+                start = tl.frame_at(view.playhead.t)
+                monkeypatch.setattr(server.gui, "_resolve_client", lambda _id: tab)
+                uuid = view.step_buttons._impl.uuid
+
+                async def click_twice() -> None:
+                    for label in ("next ›", "10 »"):
+                        message = _messages.GuiUpdateMessage(uuid, {"value": label})
+                        await server.gui._handle_gui_updates(tab.client_id, message)
+
+                pool = server.gui._thread_executor
+                busy = threading.Event()
+                for _ in range(pool._max_workers):  # other callbacks still running
+                    pool.submit(busy.wait, 30)
+                clicker = threading.Thread(target=asyncio.run, args=(click_twice(),))
+                clicker.start()  # its own event loop: the browser tests leave one running here
+                clicker.join(30)
+                busy.set()
+                pool.submit(lambda: None).result(timeout=30)
+                view._clicks.submit(lambda: None).result(timeout=30)
+                assert tl.frame_at(view.playhead.t) == start + 11
+            finally:
+                view.close()
+                app.close()
+    finally:
+        controller.close()
