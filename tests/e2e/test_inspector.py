@@ -4,6 +4,7 @@ rejected attempt and read why, and keep a screenshot for the README."""
 
 from __future__ import annotations
 
+import os
 import re
 import shutil
 import time
@@ -181,10 +182,11 @@ def _showcase_attempt(session) -> int:
     return best
 
 
-def test_screenshot_for_the_readme(page, inspector):
+def test_screenshot_for_the_readme(page, inspector, tmp_path):
     """The natural long_tunnel session (default parameters), stepped into the tunnel to an
     accepted attempt: the DR window, the aligned window, the route segment and the pairs on
-    the map, the Match tab open."""
+    the map, the Match tab open. With ROUTEFUSE_UPDATE_SCREENSHOT=1 the checked screenshot
+    replaces docs/inspector.png; otherwise the checkout is left as it was."""
     from estimator.params import Params
 
     pg, view = page
@@ -218,9 +220,9 @@ def test_screenshot_for_the_readme(page, inspector):
     for k in range(close.count()):
         close.nth(k).dispatch_event("click")  # the "software WebGL" notice covers the map
     time.sleep(2.0)
-    out = REPO / "docs" / "inspector.png"
-    out.parent.mkdir(exist_ok=True)
-    tmp = out.with_suffix(".tmp.png")
+    update = os.environ.get("ROUTEFUSE_UPDATE_SCREENSHOT") == "1"
+    out = REPO / "docs" / "inspector.png" if update else tmp_path / "inspector.png"
+    tmp = tmp_path / "inspector.tmp.png"
     pg.screenshot(path=str(tmp))
     import matplotlib.image as mpimg
 
