@@ -150,10 +150,24 @@ def test_gnss_returning_with_a_large_jump_is_taken(method: str) -> None:
             assert abs(cross[0] - cross[1]) < 3.0
 
 
+def test_under_an_unmodelled_drift_the_proposed_run_is_never_worse_than_dead_reckoning() -> None:
+    """Its matches on the bend are off along the road (below), but with an along-track sigma
+    that says so (7-19 m), so the filtered position stays at or below the baseline's error."""
+    drive, route = _drift_drive(0.15)
+    base = _run(drive.log, route, drive.frame, "baseline")
+    prop = _run(drive.log, route, drive.frame, "proposed")
+    for a in np.arange(82.0, 140.0, 2.0):
+        worst_base = _errors_between(base, drive, a, a + 2.0).max()
+        assert _errors_between(prop, drive, a, a + 2.0).max() <= worst_base + 0.5
+
+
 @pytest.mark.xfail(
     strict=True,
     reason="matching: under an unmodelled 0.15 deg/s gyro drift, matches on the gentle tunnel "
-    "bend are accepted 12-16 m off along the road while the DR was 1-3 m off",
+    "bend are accepted 8-16 m off along the road (1-2 of their along-track sigmas, errors "
+    "correlated from one attempt to the next) while the DR was 1-5 m off; later, correct "
+    "matches (1 m off) are refused by the Mahalanobis gate because the filter's covariance "
+    "does not cover a bias it does not model",
 )
 def test_matches_under_an_unmodelled_drift_are_no_worse_than_dead_reckoning() -> None:
     drive, route = _drift_drive(0.15)
