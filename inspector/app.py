@@ -9,6 +9,7 @@ the session's precomputed arrays.
 
 from __future__ import annotations
 
+import contextlib
 import threading
 import time
 import traceback
@@ -188,7 +189,7 @@ class ClientView:
             "time [s]", min=0.0, max=1.0, step=0.05, initial_value=0.0
         )
         self.time_slider.on_update(self._on_slider)
-        self.step_buttons = gui.add_button_group("frame", ("« 10", "‹ prev", "next ›", "10 »"))
+        self.step_buttons = gui.add_button_group("frame", tuple(STEP_BUTTONS))
         self.step_buttons.on_click(
             self._pressed(
                 self.step_buttons,
@@ -384,7 +385,9 @@ class ClientView:
 
         async def on_click(event: viser.GuiEvent) -> None:
             action = actions.get(group.value)
-            if action is not None:
+            if action is None:
+                return
+            with contextlib.suppress(RuntimeError):  # raised once the tab has closed
                 self._clicks.submit(action).add_done_callback(_report_failure)
 
         return on_click
