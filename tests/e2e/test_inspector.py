@@ -220,9 +220,7 @@ def test_screenshot_for_the_readme(page, inspector, tmp_path):
     for k in range(close.count()):
         close.nth(k).dispatch_event("click")  # the "software WebGL" notice covers the map
     time.sleep(2.0)
-    update = os.environ.get("ROUTEFUSE_UPDATE_SCREENSHOT") == "1"
-    out = REPO / "docs" / "inspector.png" if update else tmp_path / "inspector.png"
-    tmp = tmp_path / "inspector.tmp.png"
+    tmp = tmp_path / "inspector.png"
     pg.screenshot(path=str(tmp))
     import matplotlib.image as mpimg
 
@@ -233,7 +231,8 @@ def test_screenshot_for_the_readme(page, inspector, tmp_path):
     assert drawn.mean() > 0.002, "the 3D view is blank"
     colours = {tuple(c) for c in np.round(scene[drawn] * 4).astype(int)}
     assert len(colours) >= 4, "the 3D view shows fewer layers than expected"
-    shutil.move(tmp, out)
+    if os.environ.get("ROUTEFUSE_UPDATE_SCREENSHOT") == "1":
+        shutil.move(tmp, REPO / "docs" / "inspector.png")
 
 
 def test_parameter_slider_reruns_and_changes_metrics(page, inspector):

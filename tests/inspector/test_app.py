@@ -58,26 +58,17 @@ def test_two_quick_clicks_step_by_each_button_pressed(tmp_path, monkeypatch):
     """viser stores a button group's pressed label on the shared handle; two clicks that arrive
     while its thread pool is busy must still each move by their own button ("next ›" then
     "10 »": 11 frames, not 20)."""
-    from dataclasses import dataclass
-
+    from fake_runs import FakeInputs
     from viser import _messages
 
-    from estimator.geo import LocalFrame
-    from estimator.route import Route
     from estimator.simulate import simulate
     from inspector.app import ClientView, InspectorApp
     from inspector.bench import _HeadlessTab
     from inspector.controller import Controller, DataFolders
     from inspector.export import headless_server
 
-    @dataclass(frozen=True)
-    class Inputs:
-        log: object
-        route: Route
-        frame: LocalFrame
-
     sim = simulate("short_tunnel", imu_rate_hz=100.0)
-    inputs = Inputs(sim.log(), sim.route(), sim.frame)
+    inputs = FakeInputs(sim.log(), sim.route(), sim.frame)
     controller = Controller(DataFolders.of(tmp_path), opener=lambda *_: inputs)
     try:
         controller.open(tmp_path / "short.mcap", tmp_path / "short.geojson")

@@ -13,13 +13,11 @@ from __future__ import annotations
 import gc
 import os
 import tracemalloc
-from dataclasses import dataclass
 
 import numpy as np
 import pytest
+from fake_runs import FakeInputs
 
-from estimator.geo import LocalFrame
-from estimator.route import Route
 from inspector.controller import Controller, DataFolders
 
 pytestmark = pytest.mark.slow
@@ -27,13 +25,6 @@ pytestmark = pytest.mark.slow
 DURATION_S = 1200.0
 STEPS = 3000
 """frame steps over the whole drive (each step moves the same number of frames)"""
-
-
-@dataclass(frozen=True)
-class _Inputs:
-    log: object
-    route: Route
-    frame: LocalFrame
 
 
 def _rss_mb() -> float:
@@ -48,7 +39,7 @@ def test_stepping_a_long_drive_end_to_end_does_not_grow_memory(tmp_path):
     from inspector.export import headless_server
 
     sim = simulate("long_drive_60min", imu_rate_hz=100.0, duration_s=DURATION_S)
-    inputs = _Inputs(sim.log(), sim.route(), sim.frame)
+    inputs = FakeInputs(sim.log(), sim.route(), sim.frame)
     controller = Controller(DataFolders.of(tmp_path), opener=lambda *_: inputs)
     try:
         controller.open(tmp_path / "long.mcap", tmp_path / "long.geojson")
