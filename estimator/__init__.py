@@ -4,12 +4,12 @@ route-constrained pseudo-position updates, metrics and the tunnel simulator.
 Pure computation; never imports the inspector or viser.
 """
 
-from .errors import ConfigError, LogError, RouteError, RoutefuseError
-from .geo import LocalFrame
-from .log import GnssData, ImuData, Log, TopicInfo, TruthData, WheelData
-from .params import Params, load_params, params_to_toml, save_params
-from .results import Epochs, GateDecision, MatchRecord, Run
-from .route import Projection, Route
+from estimator.errors import ConfigError, LogError, RouteError, RoutefuseError
+from estimator.log import GnssData, ImuData, Log, TopicInfo, TruthData, WheelData
+from estimator.nav.frames import LocalFrame
+from estimator.params import Params, load_params, params_to_toml, save_params
+from estimator.results import Epochs, GateDecision, MatchRecord, Run
+from estimator.route import Projection, Route
 
 __all__ = [
     "ConfigError",

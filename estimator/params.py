@@ -17,7 +17,7 @@ from typing import Any, Literal, get_args, get_type_hints
 
 import tomli_w
 
-from .errors import ConfigError
+from estimator.errors import ConfigError
 
 Method = Literal["baseline", "proposed", "paper"]
 """``baseline``: GNSS/INS/ODO, plain DR in outages. ``proposed``: routefuse (the paper's method

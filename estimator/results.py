@@ -9,8 +9,8 @@ from typing import Literal
 import numpy as np
 from numpy.typing import NDArray
 
-from .geo import LocalFrame
-from .params import Method, Params
+from estimator.nav.frames import LocalFrame
+from estimator.params import Method, Params
 
 F64 = NDArray[np.float64]
 

@@ -7,7 +7,7 @@ from dataclasses import dataclass, field
 import numpy as np
 from numpy.typing import ArrayLike, NDArray
 
-from .errors import RouteError
+from estimator.errors import RouteError
 
 F64 = NDArray[np.float64]
 

@@ -24,10 +24,9 @@ from viser import _messages
 from estimator.errors import RoutefuseError
 from estimator.params import ParamSpec, get_param, param_specs, params_to_toml
 from estimator.results import GateDecision, MatchRecord
-
-from .controller import Controller, Playhead, Session, format_outages, parse_outages
-from .layers import LAYER_TYPES, SceneLayers
-from .plots import metrics_markdown
+from inspector.controller import Controller, Playhead, Session, format_outages, parse_outages
+from inspector.layers import LAYER_TYPES, SceneLayers
+from inspector.plots import metrics_markdown
 
 STEP_BUTTONS = {"« 10": -10, "‹ prev": -1, "next ›": 1, "10 »": 10}
 """the frame step buttons and how many output frames each moves"""

@@ -24,12 +24,11 @@ from typing import Any, Literal, Protocol
 import numpy as np
 from numpy.typing import NDArray
 
-from estimator.commands._common import parse_outage
 from estimator.errors import ConfigError, RoutefuseError
 from estimator.params import Params, with_values
 from estimator.results import Run
-
-from .scene_data import SceneData
+from inspector.cli.options import parse_outage
+from inspector.scene_data import SceneData
 
 F64 = NDArray[np.float64]
 
@@ -330,7 +329,7 @@ class Session:
     log_name: str
     route_name: str
     inputs: Any
-    """:class:`estimator.inputs.Inputs` (log, route, frame)"""
+    """:class:`estimator.pipeline.inputs.Inputs` (log, route, frame)"""
     params: Params
     method: ProposedMethod
     outages: Outages
@@ -382,13 +381,13 @@ ErrorListener = Callable[[RoutefuseError], None]
 
 
 def _default_open(log_path: Path, route_path: Path, progress: ProgressListener) -> Any:
-    from estimator.inputs import open_inputs
+    from estimator.pipeline.inputs import open_inputs
 
     return open_inputs(log_path, route_path, progress=progress)
 
 
 class RunFn(Protocol):
-    """How the worker runs one method (:func:`estimator.runner.run` unless a test fakes it)."""
+    """How the worker runs one method (:func:`estimator.pipeline.runner.run` unless a test fakes it)."""
 
     def __call__(
         self,
@@ -411,7 +410,7 @@ def _default_run(
     *,
     outages: Outages,
 ) -> Run:
-    from estimator.runner import run
+    from estimator.pipeline.runner import run
 
     return run(
         inputs.log,
@@ -784,13 +783,13 @@ class Controller:
         if self._superseded(req):
             raise Superseded
         t3 = time.perf_counter()
-        from .plots import DeviationPlot, metrics_rows
+        from inspector.plots import DeviationPlot, metrics_rows
 
         scene = SceneData.build(
             baseline=baseline, proposed=proposed, route=inputs.route, log=inputs.log
         )
         deviation = DeviationPlot.build(inputs, baseline, proposed)
-        from .offroute import OffRoute
+        from inspector.offroute import OffRoute
 
         off_route = OffRoute.build(scene, inputs.route, req.params)
         metrics = metrics_rows(inputs, baseline, proposed)

@@ -18,8 +18,7 @@ import numpy as np
 import viser
 
 from estimator.results import MatchRecord
-
-from .scene_data import F64, SceneData, Track, polyline_segments
+from inspector.scene_data import F64, SceneData, Track, polyline_segments
 
 RGB = tuple[int, int, int]
 

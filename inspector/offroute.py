@@ -4,7 +4,7 @@ or off the route. Computed once per run (vectorised, on the controller's worker 
 step only looks it up.
 
 The vehicle is the ground truth when the log has it (what really happened), else the proposed
-estimate. Its distance from the route comes from :func:`estimator.matching.track_on_route`
+estimate. Its distance from the route comes from :func:`estimator.matching.match.track_on_route`
 (followed along the route, so a loop or a parallel carriageway does not capture it). It is
 off-route where that distance exceeds ``params.offset.max_offset_m``: the largest lateral offset
 the estimator still learns as "a lane of this road" (beyond it the vehicle is not on this road),
@@ -19,7 +19,7 @@ from typing import Any, Literal
 import numpy as np
 from numpy.typing import NDArray
 
-from estimator.matching import track_on_route
+from estimator.matching.match import track_on_route
 from estimator.params import Params
 from estimator.results import MatchRecord
 from estimator.route import Route

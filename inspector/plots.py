@@ -12,7 +12,7 @@ from typing import Any
 import numpy as np
 from numpy.typing import NDArray
 
-from estimator.metrics import deviation_series, match_summary, method_metrics
+from estimator.evaluation.metrics import deviation_series, match_summary, method_metrics
 from estimator.results import Run
 from estimator.route import Route
 
@@ -33,7 +33,7 @@ def wrap_deg(a: F64) -> F64:
 
 @dataclass(frozen=True)
 class DeviationPlot:
-    """Both runs' deviations from the route (``estimator.metrics.deviation_series``, the
+    """Both runs' deviations from the route (``estimator.evaluation.metrics.deviation_series``, the
     quantities of the metrics table) on one time grid (s after the log start), thinned for
     display; and the horizontal error against truth when the log has truth."""
 
@@ -170,7 +170,7 @@ _ROW_LABELS = (
 
 def metrics_rows(inputs: Any, baseline: Run, proposed: Run) -> tuple[tuple[str, str, str], ...]:
     """Rows (quantity, baseline, proposed) of the ``routefuse run`` table
-    (``estimator.metrics.method_metrics`` over the GNSS-degraded intervals), then the match
+    (``estimator.evaluation.metrics.method_metrics`` over the GNSS-degraded intervals), then the match
     summary."""
     route: Route = inputs.route
     log = getattr(inputs, "log", None)

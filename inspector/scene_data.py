@@ -13,8 +13,8 @@ import numba
 import numpy as np
 from numpy.typing import NDArray
 
-from estimator.geo import LocalFrame
 from estimator.log import Log
+from estimator.nav.frames import LocalFrame
 from estimator.results import MatchRecord, Run
 from estimator.route import Route
 

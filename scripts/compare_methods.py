@@ -6,8 +6,8 @@
     python scripts/compare_methods.py --write   # also replace them in docs/method.md and README.md
 
 It runs what ``routefuse run LOG --route ROUTE --method baseline proposed paper
---subtract-lane-offset`` runs (:func:`estimator.runner.run`,
-:func:`estimator.metrics.method_metrics` over the GNSS-degraded intervals, route deviations
+--subtract-lane-offset`` runs (:func:`estimator.pipeline.runner.run`,
+:func:`estimator.evaluation.metrics.method_metrics` over the GNSS-degraded intervals, route deviations
 measured from the learned lane) with the default parameters, plus:
 
 - ``routefuse + heading obs.``: ``extensions.heading_observation = true``;
@@ -32,9 +32,7 @@ import numpy as np
 REPO = Path(__file__).resolve().parents[1]
 sys.path.insert(0, str(REPO))
 
-from estimator.inputs import open_inputs  # noqa: E402
-from estimator.log import Log  # noqa: E402
-from estimator.metrics import (  # noqa: E402
+from estimator.evaluation.metrics import (  # noqa: E402
     MethodMetrics,
     RouteDeviation,
     deviation_series,
@@ -42,10 +40,12 @@ from estimator.metrics import (  # noqa: E402
     match_summary,
     method_metrics,
 )
+from estimator.log import Log  # noqa: E402
 from estimator.params import ExtensionParams, Method, Params, with_values  # noqa: E402
+from estimator.pipeline.inputs import open_inputs  # noqa: E402
+from estimator.pipeline.runner import run  # noqa: E402
 from estimator.results import Run  # noqa: E402
 from estimator.route import Route  # noqa: E402
-from estimator.runner import run  # noqa: E402
 
 SAMPLES = ("long_tunnel", "spiral_tunnel", "multi_tunnel", "monaco_tunnel")
 PAPER_SCENARIO = {

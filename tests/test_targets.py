@@ -16,16 +16,16 @@ import numpy as np
 import pytest
 from scipy.stats import chi2
 
-from estimator.geo import LocalFrame
-from estimator.inputs import open_inputs
+from estimator.evaluation.metrics import MethodMetrics, deviation_series, method_metrics
 from estimator.log import Log
-from estimator.matching import shifted_route
-from estimator.metrics import MethodMetrics, deviation_series, method_metrics
+from estimator.matching.match import shifted_route
+from estimator.nav.frames import LocalFrame
 from estimator.params import Params, with_values
+from estimator.pipeline.inputs import open_inputs
+from estimator.pipeline.runner import run
 from estimator.results import Run
 from estimator.route import Route
-from estimator.runner import run
-from estimator.simulate import get_scenario, simulate
+from estimator.sim import get_scenario, simulate
 
 SAMPLE_LOGS = Path(__file__).resolve().parents[1] / "sample_logs"
 NAMES = ("long_tunnel", "spiral_tunnel", "multi_tunnel", "monaco_tunnel")

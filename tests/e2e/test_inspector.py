@@ -27,7 +27,7 @@ def _sample(tmp_path_factory: pytest.TempPathFactory) -> tuple[Path, Path]:
     route = SAMPLE.with_name("long_tunnel.route.geojson")
     if SAMPLE.exists() and route.exists():
         return SAMPLE, route
-    from estimator.simulate import simulate
+    from estimator.sim import simulate
 
     out = tmp_path_factory.mktemp("sample")
     simulate("long_tunnel", seed=0).write(out)
@@ -39,7 +39,7 @@ UPLOAD_LIMIT = 1_000_000
 
 @pytest.fixture(scope="module")
 def inspector(tmp_path_factory):
-    from inspector.commands.serve import start
+    from inspector.cli.serve import start
 
     log, route = _sample(tmp_path_factory)
     extra = tmp_path_factory.mktemp("extra")
@@ -484,7 +484,7 @@ def _detour_route(route_path: Path, out: Path) -> Path:
     2 km: the drive leaves it at the bend."""
     import json
 
-    from estimator.geo import LocalFrame
+    from estimator.nav.frames import LocalFrame
 
     doc = json.loads(route_path.read_text())
     ll = np.array(doc["features"][0]["geometry"]["coordinates"], np.float64)[:, :2]

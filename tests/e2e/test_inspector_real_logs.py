@@ -48,8 +48,8 @@ FRAME_RATE_JS = """() => new Promise(done => {
 def _route_for(name: str, log_path: Path, tmp_path: Path) -> Path:
     if name == "comma2k19":
         return DATA / "comma2k19" / "i280_route.geojson"
-    from estimator.bagio import load_log
-    from estimator.routebuild import route_from_gnss
+    from estimator.io.rosbag import load_log
+    from estimator.io.routebuild import route_from_gnss
 
     route = tmp_path / "husky_test1.route.geojson"
     gj = route_from_gnss(load_log(log_path), name="Husky lot (from its own GNSS)")
@@ -63,7 +63,7 @@ def test_inspector_shows_the_real_log(name, browser, tmp_path):
     if not log_path.exists():
         pytest.skip(f"real data not found: {log_path}")
     from estimator.params import load_params
-    from inspector.commands.serve import start
+    from inspector.cli.serve import start
 
     route = _route_for(name, log_path, tmp_path)
     params = load_params(config)

@@ -1,14 +1,14 @@
 """A small, exact synthetic drive for the filter tests: level road, analytic speed and yaw,
-IMU from the navigation model of ``estimator.simulate.model`` (so a perfect IMU integrates back
+IMU from the navigation model of ``estimator.nav.earth`` (so a perfect IMU integrates back
 to the truth), optional white noise and constant biases."""
 
 from __future__ import annotations
 
 import numpy as np
 
-from estimator.geo import LocalFrame
 from estimator.log import GnssData, ImuData, Log, TruthData, WheelData
-from estimator.simulate.model import earth_rate_n, normal_gravity
+from estimator.nav.earth import earth_rate_n, normal_gravity
+from estimator.nav.frames import LocalFrame
 
 FRAME = LocalFrame(48.0, 11.0, 500.0)
 T0 = 1.7e9

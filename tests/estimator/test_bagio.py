@@ -9,9 +9,9 @@ from rosbags.highlevel import AnyReader
 from rosbags.rosbag2 import StoragePlugin, Writer
 from rosbags.typesys import Stores, get_typestore
 
-from estimator.bagio import TopicChoice, load_log
-from estimator.bagwrite import BagTopics, StaticTransform, write_bag
 from estimator.errors import LogError
+from estimator.io.bagwrite import BagTopics, StaticTransform, write_bag
+from estimator.io.rosbag import TopicChoice, load_log
 from estimator.log import GnssData, ImuData, TruthData, WheelData
 
 T0 = 1_700_000_000.0
@@ -383,7 +383,7 @@ def test_byte_layout_fast_path_matches_full_deserialisation(tmp_path: Path, monk
     write_bag(b, imu=late, storage="ros1", imu_frame="a_much_longer_imu_frame")
     merged = tmp_path / "merged.bag"
     _merge([a, b], merged)  # one IMU topic, two message sizes
-    import estimator.bagio as bagio
+    import estimator.io.rosbag as bagio
 
     found: list[object] = []
     real = bagio._find_offsets
@@ -410,7 +410,7 @@ def test_cache_keeps_to_its_size_limit(tmp_path: Path, monkeypatch) -> None:
         write_bag(paths[-1], imu=ImuData(imu.t + i, imu.gyro, imu.accel), gnss=gnss)
     load_log(paths[0], cache_dir=cache)
     (entry,) = cache.glob("log-*.npz")
-    monkeypatch.setattr("estimator.bagio.CACHE_MAX_BYTES", int(2.5 * entry.stat().st_size))
+    monkeypatch.setattr("estimator.io.rosbag.CACHE_MAX_BYTES", int(2.5 * entry.stat().st_size))
     load_log(paths[1], cache_dir=cache)
     os.utime(entry, (1.0, 1.0))  # log0 is the least recently used
     load_log(paths[2], cache_dir=cache)

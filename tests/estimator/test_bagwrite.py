@@ -6,7 +6,7 @@ import numpy as np
 import pytest
 from rosbags.highlevel import AnyReader
 
-from estimator.bagwrite import BagTopics, StaticTransform, write_bag
+from estimator.io.bagwrite import BagTopics, StaticTransform, write_bag
 from estimator.log import GnssData, ImuData, TruthData, WheelData
 
 T0 = 1_700_000_000.0

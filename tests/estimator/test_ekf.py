@@ -9,11 +9,11 @@ import numpy as np
 import pytest
 from _synthetic_drive import FRAME, T0, drive, kinematics
 
-from estimator import ekf
+from estimator.filter import ekf
+from estimator.nav.rotation import dcm_from_euler
 from estimator.params import Params
-from estimator.runner import _Driver, _prepare, run
-from estimator.simulate import simulate
-from estimator.simulate.model import dcm_from_euler
+from estimator.pipeline.runner import _Driver, _prepare, run
+from estimator.sim import simulate
 
 
 def _skew(v):

@@ -5,7 +5,7 @@ import pytest
 from hypothesis import given, settings
 from hypothesis import strategies as st
 
-from estimator.geo import LocalFrame
+from estimator.nav.frames import LocalFrame
 
 R_EARTH = 6_371_000.0
 

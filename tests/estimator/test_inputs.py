@@ -6,10 +6,10 @@ from pathlib import Path
 import numpy as np
 import pytest
 
-from estimator.bagwrite import write_bag
 from estimator.errors import LogError, RouteError
-from estimator.inputs import frame_of, open_inputs, route_distances
+from estimator.io.bagwrite import write_bag
 from estimator.log import GnssData, ImuData, TruthData
+from estimator.pipeline.inputs import frame_of, open_inputs, route_distances
 
 T0 = 1_600_000_000.0
 

@@ -11,7 +11,7 @@ from hypothesis import given, settings
 from hypothesis import strategies as st
 
 from estimator.errors import RoutefuseError
-from estimator.matching import (
+from estimator.matching.match import (
     _kabsch,
     _kabsch_one,
     _scan,
@@ -487,8 +487,8 @@ def test_realistic_dr_error_on_real_tunnel_geometry():
         pytest.skip(f"real data not found at {path}")
     from scipy.ndimage import gaussian_filter1d
 
-    from estimator.geo import LocalFrame
-    from estimator.routeio import load_route
+    from estimator.io.routefile import load_route
+    from estimator.nav.frames import LocalFrame
 
     c0 = json.loads(path.read_text())["features"][0]["geometry"]["coordinates"][0]
     frame = LocalFrame(c0[1], c0[0])
@@ -620,7 +620,7 @@ def test_track_on_route_keeps_to_the_driven_stretch() -> None:
     """Out and back 5 m apart: a vehicle 3 m left of the outbound stretch is nearer to the
     return stretch once beside it. Nearest-point projection jumps there; tracking along the
     route does not."""
-    from estimator.matching import project_on_route, track_on_route
+    from estimator.matching.match import project_on_route, track_on_route
 
     theta = np.linspace(-np.pi / 2, np.pi / 2, 30)
     turn = np.column_stack([300 + 2.5 * np.cos(theta), 2.5 + 2.5 * np.sin(theta)])

@@ -16,13 +16,13 @@ import numpy as np
 import pytest
 from numba import njit
 
-from estimator import matching
 from estimator.errors import RouteError
-from estimator.matching_kernels import offset_polyline, polyline_arrays, unit_interval
+from estimator.matching import match as matching
+from estimator.matching.kernels import offset_polyline, polyline_arrays, unit_interval
 from estimator.params import Params
+from estimator.pipeline.runner import run
 from estimator.route import Route
-from estimator.runner import run
-from estimator.simulate import simulate
+from estimator.sim import simulate
 
 RESIDUALS = ("residual_m", "residual_left_m", "residual_right_m", "residual_reversed_m")
 
@@ -161,9 +161,9 @@ REFERENCE = {
 
 @pytest.fixture
 def reference_matcher(monkeypatch):
-    """Swap the numpy originals back into estimator.matching."""
+    """Swap the numpy originals back into estimator.matching.match."""
     for name, fn in REFERENCE.items():
-        assert hasattr(matching, name), f"estimator.matching.{name} is gone: update the test"
+        assert hasattr(matching, name), f"estimator.matching.match.{name} is gone: update the test"
         monkeypatch.setattr(matching, name, fn)
 
 
@@ -452,7 +452,7 @@ def ref_max_turn_deg(xy, stretch_m, spacing_m):
 
 @pytest.mark.parametrize("seed", range(40))
 def test_max_turn_is_the_numpy_max_turn(seed):
-    from estimator.runner import _max_turn_deg
+    from estimator.pipeline.runner import _max_turn_deg
 
     rng = np.random.default_rng(seed)
     n = int(rng.integers(2, 1500))
@@ -495,7 +495,7 @@ def test_rotation_sigma_is_the_numpy_one(seed):
 
 
 def test_column_search_is_searchsorted():
-    from estimator.matching_kernels import search_right
+    from estimator.matching.kernels import search_right
 
     rows = np.zeros((500, 26))
     rows[:, 17] = np.cumsum(np.random.default_rng(0).choice([0.0, 0.5, 1.3], 500))
@@ -506,7 +506,7 @@ def test_column_search_is_searchsorted():
 
 def ref_window(out, n_out, x, aux, length_m):
     """runner._Driver._window in numpy (before the kernel)."""
-    from estimator import ekf
+    from estimator.filter import ekf
 
     dist = out[:n_out, ekf.O_DIST]
     d_now = float(aux[ekf.A_DIST])
@@ -519,8 +519,8 @@ def ref_window(out, n_out, x, aux, length_m):
 
 @pytest.mark.parametrize("seed", range(10))
 def test_window_is_the_numpy_window(seed):
-    from estimator import ekf
-    from estimator.runner import _Driver
+    from estimator.filter import ekf
+    from estimator.pipeline.runner import _Driver
 
     rng = np.random.default_rng(seed)
     n = int(rng.integers(1, 3000))

@@ -7,10 +7,15 @@ import pytest
 from hypothesis import given, settings
 from hypothesis import strategies as st
 
-from estimator.geo import LocalFrame
+from estimator.evaluation.metrics import (
+    deviation_series,
+    format_table,
+    match_summary,
+    method_metrics,
+)
 from estimator.log import GnssData, ImuData, Log, TruthData
-from estimator.matching import match_window, project_on_route
-from estimator.metrics import deviation_series, format_table, match_summary, method_metrics
+from estimator.matching.match import match_window, project_on_route
+from estimator.nav.frames import LocalFrame
 from estimator.params import Params, with_values
 from estimator.results import Epochs, GateDecision, Run
 from estimator.route import Route

@@ -9,12 +9,12 @@ from pathlib import Path
 import numpy as np
 import pytest
 
-from estimator.bagio import load_log
-from estimator.inputs import open_inputs
-from estimator.metrics import match_summary, method_metrics
+from estimator.evaluation.metrics import match_summary, method_metrics
+from estimator.io.rosbag import load_log
+from estimator.io.routebuild import route_from_gnss
 from estimator.params import Params, load_params
-from estimator.routebuild import route_from_gnss
-from estimator.runner import run
+from estimator.pipeline.inputs import open_inputs
+from estimator.pipeline.runner import run
 
 REPO = Path(__file__).resolve().parents[2]
 DATA = REPO.parent / "shared" / "data"

@@ -5,9 +5,9 @@ from __future__ import annotations
 import numpy as np
 import pytest
 
-from estimator.geo import LocalFrame
+from estimator.io.routebuild import moving_average, route_geojson, route_polyline
+from estimator.nav.frames import LocalFrame
 from estimator.route import Route
-from estimator.routebuild import moving_average, route_geojson, route_polyline
 
 
 def _arc_track(noise: float = 0.0, seed: int = 0) -> np.ndarray:
@@ -78,8 +78,8 @@ def test_geojson_round_trip_in_lon_lat():
 
 
 def test_route_from_a_logs_gnss_follows_its_fixes():
+    from estimator.io.routebuild import route_from_gnss
     from estimator.log import GnssData, ImuData, Log
-    from estimator.routebuild import route_from_gnss
 
     frame = LocalFrame(42.3765, -71.1474, 0.0)
     xy = _arc_track(noise=0.5, seed=1)

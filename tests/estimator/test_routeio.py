@@ -7,8 +7,8 @@ import numpy as np
 import pytest
 
 from estimator.errors import RouteError
-from estimator.geo import LocalFrame
-from estimator.routeio import load_route, read_route_file
+from estimator.io.routefile import load_route, read_route_file
+from estimator.nav.frames import LocalFrame
 
 LAT = [48.1000, 48.1010, 48.1020, 48.1025]
 LON = [11.5000, 11.5005, 11.5015, 11.5030]

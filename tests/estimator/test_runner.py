@@ -13,9 +13,9 @@ from scipy.stats import chi2
 from estimator.errors import LogError, RoutefuseError
 from estimator.log import ImuData
 from estimator.params import Params, with_values
+from estimator.pipeline.runner import run
 from estimator.route import Route
-from estimator.runner import run
-from estimator.simulate import simulate
+from estimator.sim import simulate
 
 DATA = Path(__file__).resolve().parents[2] / ".." / "shared" / "data"
 
@@ -260,7 +260,7 @@ def _load(name):
     path = DATA / name
     if not path.exists():
         pytest.skip(f"{path} not present (shared sample data)")
-    from estimator.bagio import load_log
+    from estimator.io.rosbag import load_log
 
     return load_log(path)
 
@@ -291,8 +291,8 @@ def test_husky_bag_with_its_rotated_imu():
 
 def test_comma_bag_baseline_and_proposed_with_an_outage():
     log = _load("comma2k19/i280.mcap")
-    from estimator.geo import LocalFrame
-    from estimator.routeio import load_route
+    from estimator.io.routefile import load_route
+    from estimator.nav.frames import LocalFrame
 
     ok = log.gnss.valid
     frame = LocalFrame.at(log.gnss.lat[ok], log.gnss.lon[ok], log.gnss.alt[ok])
@@ -365,7 +365,7 @@ def test_baseline_after_baseline_reuses_the_whole_run(tunnel, monkeypatch):
     base = run(log, route, Params(), method="baseline", frame=frame)
     p = with_values(Params(), {"gates.max_residual_m": 0.5, "window.length_m": 150.0})
     fresh = run(log, route, p, method="baseline", frame=frame)
-    from estimator import runner
+    from estimator.pipeline import runner
 
     def no_filter(*args, **kwargs):
         raise AssertionError("the filter ran")
@@ -392,7 +392,7 @@ def test_a_gate_change_refits_no_attempt_before_the_first_changed_outcome(
         for i, (a, b) in enumerate(zip(fresh.matches, tunnel_proposed.matches, strict=False))
         if a.accepted != b.accepted
     ]
-    from estimator import runner
+    from estimator.pipeline import runner
 
     fits = []
     real = runner.match_geometry
@@ -413,7 +413,7 @@ def test_a_gate_change_refits_no_attempt_before_the_first_changed_outcome(
 
 
 def test_max_turn_is_the_largest_heading_change_over_a_stretch():
-    from estimator.runner import _max_turn_deg
+    from estimator.pipeline.runner import _max_turn_deg
 
     s = np.linspace(0.0, 1000.0, 401)
     straight = np.column_stack([s, np.zeros_like(s)])
@@ -429,7 +429,7 @@ def test_max_turn_is_the_largest_heading_change_over_a_stretch():
 
 
 def test_a_match_that_does_not_observe_along_track_updates_cross_track_only():
-    from estimator.runner import UNOBSERVED_VAR, _applied_obs_cov
+    from estimator.pipeline.runner import UNOBSERVED_VAR, _applied_obs_cov
 
     tangent = np.array([np.cos(0.3), np.sin(0.3)])
     normal = np.array([-tangent[1], tangent[0]])

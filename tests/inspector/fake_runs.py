@@ -7,7 +7,7 @@ from dataclasses import dataclass
 
 import numpy as np
 
-from estimator.geo import LocalFrame
+from estimator.nav.frames import LocalFrame
 from estimator.params import Params
 from estimator.results import Epochs, GateDecision, MatchRecord, Run
 from estimator.route import Route

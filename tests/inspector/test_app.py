@@ -61,11 +61,11 @@ def test_two_quick_clicks_step_by_each_button_pressed(tmp_path, monkeypatch):
     from fake_runs import FakeInputs
     from viser import _messages
 
-    from estimator.simulate import simulate
+    from benchmarks.harness import _HeadlessTab
+    from estimator.sim import simulate
     from inspector.app import ClientView, InspectorApp
-    from inspector.bench import _HeadlessTab
     from inspector.controller import Controller, DataFolders
-    from inspector.export import headless_server
+    from inspector.export.replay import headless_server
 
     sim = simulate("short_tunnel", imu_rate_hz=100.0)
     inputs = FakeInputs(sim.log(), sim.route(), sim.frame)

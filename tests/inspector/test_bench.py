@@ -5,8 +5,8 @@ from __future__ import annotations
 
 import pytest
 
+from benchmarks.harness import ITEM_NAMES, MEASURES, Target, format_table, select_items
 from estimator.errors import ConfigError
-from inspector.bench import ITEM_NAMES, MEASURES, Target, format_table, select_items
 
 
 def test_every_item_has_a_measure():

@@ -18,9 +18,9 @@ import zstandard
 from fake_runs import make_route, make_run
 
 from estimator.errors import ConfigError
-from estimator.simulate import simulate
-from inspector.cli import main
-from inspector.export import ReplayOptions, export_log, replay_times
+from estimator.sim import simulate
+from inspector.cli.main import main
+from inspector.export.replay import ReplayOptions, export_log, replay_times
 from inspector.scene_data import SceneData
 
 EXPECTED = {
@@ -339,8 +339,8 @@ def test_trajectory_csv_columns(exported):
 
 def test_log_without_truth_as_ros1_bag(bag, tmp_path):
     """A real log has no ground truth: no truth TUM, no truth columns, no truth table."""
-    from estimator.bagio import load_log
-    from estimator.bagwrite import write_bag
+    from estimator.io.bagwrite import write_bag
+    from estimator.io.rosbag import load_log
 
     log_path, route = bag
     log = load_log(log_path)
@@ -360,7 +360,7 @@ def test_log_without_truth_as_ros1_bag(bag, tmp_path):
 
 def test_find_logs_in_a_folder_and_by_glob(tmp_path):
     from estimator.errors import RoutefuseError
-    from inspector.export import find_logs, route_beside
+    from inspector.export.replay import find_logs, route_beside
 
     for name in ("a.mcap", "a.route.geojson", "b.bag", "notes.txt"):
         (tmp_path / name).write_text("x")

@@ -15,8 +15,8 @@ import pytest
 sys.path.insert(0, str(Path(__file__).resolve().parents[1] / "robustness"))
 from _faultdrive import T0, make_drive, route_along
 
-from estimator.geo import LocalFrame
 from estimator.log import TruthData
+from estimator.nav.frames import LocalFrame
 from estimator.params import Params
 from estimator.route import Route
 from inspector.controller import Controller, DataFolders

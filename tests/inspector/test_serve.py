@@ -11,8 +11,8 @@ import urllib.request
 import pytest
 
 from estimator.errors import RoutefuseError
-from inspector.cli import build_parser
-from inspector.commands import serve
+from inspector.cli import serve
+from inspector.cli.main import build_parser
 
 
 def _free_port() -> int:
@@ -75,7 +75,7 @@ def test_execute_warns_on_a_public_host_and_prints_the_url(tmp_path, capsys):
 
 
 def test_a_bad_outage_fails_like_export_before_the_server_starts(tmp_path, capsys, monkeypatch):
-    from inspector.cli import main
+    from inspector.cli.main import main
 
     started: list = []
     monkeypatch.setattr(serve, "start", lambda **kw: started.append(kw))

@@ -14,8 +14,8 @@ import time
 import urllib.request
 from pathlib import Path
 
-from inspector.cli import build_parser
-from inspector.commands import serve
+from inspector.cli import serve
+from inspector.cli.main import build_parser
 from inspector.controller import UploadFolder
 
 

@@ -33,10 +33,10 @@ def _rss_mb() -> float:
 
 
 def test_stepping_a_long_drive_end_to_end_does_not_grow_memory(tmp_path):
-    from estimator.simulate import simulate
+    from benchmarks.harness import _HeadlessTab
+    from estimator.sim import simulate
     from inspector.app import ClientView, InspectorApp
-    from inspector.bench import _HeadlessTab
-    from inspector.export import headless_server
+    from inspector.export.replay import headless_server
 
     sim = simulate("long_drive_60min", imu_rate_hz=100.0, duration_s=DURATION_S)
     inputs = FakeInputs(sim.log(), sim.route(), sim.frame)

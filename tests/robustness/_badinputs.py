@@ -15,19 +15,19 @@ from typing import Any
 import numpy as np
 import pytest
 
-from estimator.bagwrite import write_bag
 from estimator.errors import RoutefuseError
+from estimator.io.bagwrite import write_bag
 from estimator.log import Log
 from estimator.results import Run
-from estimator.simulate import Simulation, simulate
-from inspector import cli
+from estimator.sim import Simulation, simulate
+from inspector.cli import main as cli
 
 SCENARIO = "short_tunnel"
 """75 s: a turn, a 400 m tunnel (GNSS lost for about 27 s), open sky; ~0.5 s per run."""
 
 HAS_RUN_COMMAND = (
-    "estimator.commands.run" in cli.COMMANDS
-    and importlib.util.find_spec("estimator.commands.run") is not None
+    "inspector.cli.run" in cli.COMMANDS
+    and importlib.util.find_spec("inspector.cli.run") is not None
 )
 COMMANDS = ("info", "run")
 
@@ -50,7 +50,7 @@ def write_log(path: Path, *, storage: str = "mcap", **streams: Any) -> Path:
 
 def write_route(path: Path) -> Path:
     """The base drive's route as GeoJSON."""
-    from estimator.simulate.sdmap import write_geojson
+    from estimator.sim.sdmap import write_geojson
 
     write_geojson(path, base_sim().route_geojson())
     return path
@@ -152,7 +152,7 @@ def run_cli(capsys: pytest.CaptureFixture[str], argv: Sequence[str]) -> tuple[in
 
 def cli_argv(command: str, log: Path, route: Path | None) -> list[str]:
     if command == "run" and not HAS_RUN_COMMAND:
-        pytest.skip("routefuse run is not registered in inspector.cli.COMMANDS yet")
+        pytest.skip("routefuse run is not registered in inspector.cli.main.COMMANDS yet")
     return [command, str(log)] + ([] if route is None else ["--route", str(route)])
 
 

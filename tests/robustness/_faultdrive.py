@@ -1,6 +1,6 @@
 """Drives the tunnel simulator cannot make (a stop of minutes, a U-turn, a detour off the
 route), built directly as :class:`Log` arrays: a level road, speed and yaw rate piecewise
-linear in time, the IMU from the navigation model of ``estimator.simulate.model`` (so a perfect
+linear in time, the IMU from the navigation model of ``estimator.nav.earth`` (so a perfect
 IMU integrates back to the truth), MEMS-like noise and biases, GNSS with outages."""
 
 from __future__ import annotations
@@ -11,10 +11,10 @@ from dataclasses import dataclass
 import numpy as np
 from numpy.typing import NDArray
 
-from estimator.geo import LocalFrame
 from estimator.log import GnssData, ImuData, Log, WheelData
+from estimator.nav.earth import earth_rate_n, normal_gravity
+from estimator.nav.frames import LocalFrame
 from estimator.route import Route
-from estimator.simulate.model import earth_rate_n, normal_gravity
 
 F64 = NDArray[np.float64]
 FRAME = LocalFrame(46.0, 8.0, 400.0)

@@ -23,10 +23,10 @@ from _badinputs import (
     write_log,
 )
 
-from estimator.bagio import load_log
 from estimator.errors import LogError
-from estimator.inputs import open_inputs
+from estimator.io.rosbag import load_log
 from estimator.log import GnssData, ImuData
+from estimator.pipeline.inputs import open_inputs
 
 HUGE_BYTES = 210_000_000
 """Just over the inspector's 200 MB upload limit."""
@@ -202,7 +202,7 @@ def test_huge_file_is_never_read_into_memory(tmp_path: Path, name: str, head: by
 
 
 def test_wrong_magic_is_refused_before_hashing(tmp_path: Path, monkeypatch) -> None:
-    import estimator.bagio as bagio
+    import estimator.io.rosbag as bagio
 
     def no_hash(*args, **kwargs):
         raise AssertionError("the file was hashed")

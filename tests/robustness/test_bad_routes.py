@@ -26,10 +26,10 @@ from _badinputs import (
 )
 
 from estimator.errors import RouteError
-from estimator.inputs import open_inputs
+from estimator.io.routefile import MAX_ROUTE_BYTES, read_route_file
 from estimator.params import Params
-from estimator.routeio import MAX_ROUTE_BYTES, read_route_file
-from estimator.runner import run
+from estimator.pipeline.inputs import open_inputs
+from estimator.pipeline.runner import run
 
 BOMB = """<?xml version="1.0"?>
 <!DOCTYPE lolz [

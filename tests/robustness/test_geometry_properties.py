@@ -14,8 +14,8 @@ import pyproj
 from hypothesis import assume, given, settings
 from hypothesis import strategies as st
 
-from estimator.geo import LocalFrame
-from estimator.matching import kabsch_2d, resample_polyline
+from estimator.matching.match import kabsch_2d, resample_polyline
+from estimator.nav.frames import LocalFrame
 from estimator.route import Route
 
 SEEDS = st.integers(0, 2**32 - 1)

@@ -16,9 +16,9 @@ from _badinputs import finite_log
 from hypothesis import HealthCheck, given, settings
 from hypothesis import strategies as st
 
-from estimator.bagio import load_log
-from estimator.bagwrite import StaticTransform, write_bag
 from estimator.errors import LogError
+from estimator.io.bagwrite import StaticTransform, write_bag
+from estimator.io.rosbag import load_log
 from estimator.log import GnssData, ImuData, Log, TruthData, WheelData
 
 STORAGES = ("mcap", "mcap-folder", "sqlite3", "ros1")

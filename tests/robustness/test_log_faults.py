@@ -15,9 +15,9 @@ from _faultdrive import T0, FaultDrive, make_drive, route_along
 
 from estimator.log import GnssData, ImuData, Log, WheelData
 from estimator.params import Params
+from estimator.pipeline.runner import run
 from estimator.results import Run
 from estimator.route import Route
-from estimator.runner import run
 
 OPEN_SKY_TURNS = [(0, 0), (10, 0), (12, 3), (25, 3), (27, 0), (40, 0), (42, -3), (55, -3), (57, 0)]
 """80 s of open sky with a left and a right turn before every fault drive's tunnel (80 s on)"""

@@ -22,11 +22,11 @@ from _badinputs import (
     write_log,
 )
 
-from estimator.bagio import load_log
-from estimator.inputs import open_inputs
+from estimator.io.rosbag import load_log
 from estimator.log import GnssData, ImuData, Log, WheelData
 from estimator.params import Params
-from estimator.runner import run
+from estimator.pipeline.inputs import open_inputs
+from estimator.pipeline.runner import run
 
 IMU_BAD = np.array([100, 101, 2000, 3000, 3001, 3002])
 WHEEL_BAD = np.array([50, 51, 1000])
@@ -379,7 +379,7 @@ def test_a_long_gap_does_not_stall_a_run_with_progress(
 def test_a_tf_static_without_a_rotation_is_ignored(tmp_path: Path, rotation) -> None:
     """Found by the loader fuzz test: a zero or NaN quaternion in /tf_static made every IMU
     sample NaN. The transform is now ignored with a warning and the IMU is left as it is."""
-    from estimator.bagwrite import StaticTransform
+    from estimator.io.bagwrite import StaticTransform
 
     sim = base_sim()
     path = write_log(

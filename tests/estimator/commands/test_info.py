@@ -6,9 +6,9 @@ from pathlib import Path
 import numpy as np
 import pytest
 
-from estimator.bagwrite import BagTopics, write_bag
+from estimator.io.bagwrite import BagTopics, write_bag
 from estimator.log import GnssData, ImuData, WheelData
-from inspector.cli import main
+from inspector.cli.main import main
 
 T0 = 1_650_000_000.0
 

@@ -9,8 +9,8 @@ from pathlib import Path
 
 import pytest
 
-from estimator.simulate import simulate
-from inspector.cli import main
+from estimator.sim import simulate
+from inspector.cli.main import main
 
 DATA = Path(__file__).resolve().parents[3] / ".." / "shared" / "data"
 

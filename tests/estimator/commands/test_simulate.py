@@ -4,9 +4,9 @@ from __future__ import annotations
 
 import json
 
-from estimator.bagio import load_log
-from estimator.simulate import SCENARIOS
-from inspector.cli import main
+from estimator.io.rosbag import load_log
+from estimator.sim import SCENARIOS
+from inspector.cli.main import main
 
 
 def test_list(capsys) -> None:

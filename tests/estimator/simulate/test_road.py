@@ -7,11 +7,11 @@ import pytest
 from scipy.integrate import cumulative_trapezoid
 
 from estimator.errors import ConfigError
-from estimator.geo import LocalFrame
+from estimator.nav.frames import LocalFrame
 from estimator.route import Route
-from estimator.simulate import Road, pieces_from_polyline, straight, turn
-from estimator.simulate.monaco import LONLAT
-from estimator.simulate.road import CosineSteps, gaussian_smooth, resample_polyline
+from estimator.sim import Road, pieces_from_polyline, straight, turn
+from estimator.sim.monaco import LONLAT
+from estimator.sim.road import CosineSteps, gaussian_smooth, resample_polyline
 
 
 @pytest.mark.parametrize("transition", ["clothoid", "cosine"])

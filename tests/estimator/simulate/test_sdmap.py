@@ -6,8 +6,8 @@ import numpy as np
 import pytest
 
 from estimator.route import Route
-from estimator.simulate import Road, RouteModel, straight, turn
-from estimator.simulate.sdmap import douglas_peucker, map_route
+from estimator.sim import Road, RouteModel, straight, turn
+from estimator.sim.sdmap import douglas_peucker, map_route
 
 
 def test_douglas_peucker_keeps_ends_and_corners() -> None:

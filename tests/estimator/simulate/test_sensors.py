@@ -7,14 +7,14 @@ from dataclasses import replace
 import numpy as np
 import pytest
 
-from estimator.simulate import (
+from estimator.sim import (
     GnssErrorModel,
     ImuErrorModel,
     WheelErrorModel,
     get_scenario,
     simulate,
 )
-from estimator.simulate.sensors import (
+from estimator.sim.sensors import (
     DEG_H,
     MG,
     apply_imu_errors,

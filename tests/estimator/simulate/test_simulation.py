@@ -7,12 +7,12 @@ import json
 import numpy as np
 import pytest
 
-from estimator.bagio import load_log
 from estimator.errors import ConfigError
-from estimator.geo import LocalFrame
+from estimator.io.rosbag import load_log
+from estimator.io.routefile import load_route
+from estimator.nav.frames import LocalFrame
 from estimator.route import Route
-from estimator.routeio import load_route
-from estimator.simulate import SCENARIOS, Trajectory, get_scenario, polyline_scenario, simulate
+from estimator.sim import SCENARIOS, Trajectory, get_scenario, polyline_scenario, simulate
 
 SAMPLES = ("long_tunnel", "spiral_tunnel", "multi_tunnel", "monaco_tunnel")
 

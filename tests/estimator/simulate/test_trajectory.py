@@ -1,5 +1,5 @@
 """The truth is self-consistent, and a perfect IMU integrated in the model of
-:mod:`estimator.simulate.model` reproduces it."""
+:mod:`estimator.nav.earth` reproduces it."""
 
 from __future__ import annotations
 
@@ -7,15 +7,9 @@ import numpy as np
 import pytest
 
 from estimator.errors import ConfigError
-from estimator.simulate import Road, Trajectory, simulate, straight, turn
-from estimator.simulate.model import (
-    body_rate_from_euler_rates,
-    dcm_from_euler,
-    earth_rate_n,
-    euler_from_dcm,
-    gravity_n,
-    normal_gravity,
-)
+from estimator.nav.earth import earth_rate_n, gravity_n, normal_gravity
+from estimator.nav.rotation import body_rate_from_euler_rates, dcm_from_euler, euler_from_dcm
+from estimator.sim import Road, Trajectory, simulate, straight, turn
 
 
 def _hilly_road() -> Road:

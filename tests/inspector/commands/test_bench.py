@@ -7,7 +7,7 @@ import json
 
 import pytest
 
-from inspector.cli import main
+from inspector.cli.main import main
 
 
 def test_quick_load_json(tmp_path, capsys):

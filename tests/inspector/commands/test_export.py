@@ -10,8 +10,8 @@ from pathlib import Path
 
 import pytest
 
-from estimator.simulate import simulate
-from inspector.cli import main
+from estimator.sim import simulate
+from inspector.cli.main import main
 
 
 @pytest.fixture(scope="module")

@@ -1,0 +1,348 @@
+"""Read a mission route from GeoJSON, GPX, KML or CSV into a :class:`Route` in the session's ENU
+frame.
+
+Standard library only. XML files are refused when they declare a DOCTYPE or ENTITY: GPX and KML
+never need one, and refusing them before parsing rules out entity-expansion attacks without a
+hardened parser.
+"""
+
+from __future__ import annotations
+
+import csv
+import io
+import json
+import re
+import xml.etree.ElementTree as ET
+from dataclasses import dataclass
+from pathlib import Path
+from typing import Any, Literal
+
+import numpy as np
+from numpy.typing import NDArray
+
+from estimator.errors import RouteError
+from estimator.nav.frames import LocalFrame
+from estimator.route import Route
+
+RouteFormat = Literal["geojson", "gpx", "kml", "csv"]
+
+SUFFIXES: dict[str, RouteFormat] = {
+    ".geojson": "geojson",
+    ".json": "geojson",
+    ".gpx": "gpx",
+    ".kml": "kml",
+    ".csv": "csv",
+}
+
+F64 = NDArray[np.float64]
+
+MAX_ROUTE_BYTES = 50_000_000
+"""Route files are read whole; a larger file is refused before it is read (a 1000 km route at
+one vertex per metre is about 40 MB of GeoJSON)."""
+
+
+@dataclass(frozen=True)
+class RouteLine:
+    """One route polyline as read from the file, in geodetic degrees (height NaN if absent)."""
+
+    lat: F64
+    lon: F64
+    alt: F64
+    name: str
+    source: str
+
+
+@dataclass(frozen=True)
+class _Candidate:
+    name: str
+    points: list[tuple[float, float, float]]
+
+
+def read_route_file(path: str | Path, *, feature: str | int | None = None) -> RouteLine:
+    """The route polyline of a file. With several lines in the file (features, tracks,
+    placemarks), ``feature`` picks one by name or index; without it that is an error listing
+    them."""
+    p = Path(path)
+    return _to_line(p, _choose(p, _candidates(p), feature))
+
+
+def read_route_lines(path: str | Path) -> tuple[RouteLine, ...]:
+    """Every line of a route file (to list them, e.g. in ``routefuse info``)."""
+    p = Path(path)
+    return tuple(_to_line(p, c) for c in _candidates(p))
+
+
+def _candidates(p: Path) -> list[_Candidate]:
+    fmt = SUFFIXES.get(p.suffix.lower())
+    if fmt is None:
+        raise RouteError(
+            p,
+            f"unknown route format '{p.suffix or p.name}': expected .geojson/.json, .gpx, .kml "
+            "or .csv",
+        )
+    text = _read_text(p)
+    return {
+        "geojson": _geojson_lines,
+        "gpx": _gpx_lines,
+        "kml": _kml_lines,
+        "csv": _csv_lines,
+    }[fmt](p, text)
+
+
+def _to_line(p: Path, chosen: _Candidate) -> RouteLine:
+    pts = np.array(chosen.points, dtype=np.float64).reshape(-1, 3)
+    if len(pts) < 2:
+        raise RouteError(p, f"route has {len(pts)} point{'s' * (len(pts) != 1)}; need at least 2")
+    lat, lon, alt = pts[:, 0], pts[:, 1], pts[:, 2]
+    bad = ~(np.isfinite(lat) & np.isfinite(lon))
+    if bad.any():
+        raise RouteError(
+            p, f"route point {int(np.flatnonzero(bad)[0])} has a non-finite coordinate"
+        )
+    if np.any(np.abs(lat) > 90.0) or np.any(np.abs(lon) > 180.0):
+        i = int(np.flatnonzero((np.abs(lat) > 90.0) | (np.abs(lon) > 180.0))[0])
+        raise RouteError(
+            p,
+            f"route point {i} is out of range (lat {lat[i]:g}, lon {lon[i]:g}); "
+            "expected degrees with |lat| <= 90 and |lon| <= 180",
+        )
+    return RouteLine(lat, lon, alt, chosen.name or p.stem, str(p))
+
+
+def load_route(path: str | Path, frame: LocalFrame, *, feature: str | int | None = None) -> Route:
+    """A route file as a :class:`Route` in ``frame``'s EN plane."""
+    return route_in_frame(read_route_file(path, feature=feature), frame)
+
+
+def route_in_frame(line: RouteLine, frame: LocalFrame) -> Route:
+    """Points without a height are placed at the frame origin's height, so a missing height
+    does not tilt them off the plane."""
+    h = np.where(np.isfinite(line.alt), line.alt, frame.h0)
+    enu = frame.to_enu(line.lat, line.lon, h)
+    if not np.all(np.isfinite(enu)):
+        raise RouteError(line.source, "route cannot be placed in the local frame (non-finite ENU)")
+    return Route(enu[:, :2], name=line.name, source=line.source)
+
+
+# ---------------------------------------------------------------------------------------------
+
+
+def _read_text(p: Path) -> str:
+    if not p.exists():
+        raise RouteError(p, "no such file")
+    if p.is_dir():
+        raise RouteError(p, "is a folder, expected a route file")
+    size = p.stat().st_size
+    if size > MAX_ROUTE_BYTES:
+        raise RouteError(
+            p,
+            f"file is {size / 1e6:.1f} MB; route files over {MAX_ROUTE_BYTES / 1e6:g} MB are "
+            "refused (a route is a polyline of at most a few MB)",
+        )
+    try:
+        text = p.read_bytes().decode("utf-8-sig")
+    except UnicodeDecodeError as exc:
+        raise RouteError(p, f"not a UTF-8 text file (byte {exc.start})") from None
+    except OSError as exc:
+        raise RouteError(p, f"cannot read the file ({exc.strerror or exc})") from None
+    if not text.strip():
+        raise RouteError(p, "file is empty")
+    return text
+
+
+def _choose(p: Path, cands: list[_Candidate], feature: str | int | None) -> _Candidate:
+    if not cands:
+        raise RouteError(p, "no line geometry found (need a LineString, track or route)")
+    if feature is not None:
+        key = str(feature).strip()
+        by_name = [c for c in cands if c.name == key]
+        if len(by_name) == 1:
+            return by_name[0]
+        if key.lstrip("-").isdigit() and -len(cands) <= int(key) < len(cands):
+            return cands[int(key)]
+        what = "several" if by_name else "no"
+        raise RouteError(
+            p,
+            f"{what} line feature{'s' if by_name else ''} named or numbered {key!r}; "
+            f"the file has {_listing(cands)}",
+        )
+    if len(cands) > 1:
+        raise RouteError(
+            p,
+            f"the file has {_listing(cands)}; choose one with --route-feature NAME_OR_INDEX",
+        )
+    return cands[0]
+
+
+def _listing(cands: list[_Candidate]) -> str:
+    names = ", ".join(f"{i}: {c.name or '(unnamed)'}" for i, c in enumerate(cands))
+    return f"{len(cands)} lines ({names})"
+
+
+def _num(value: Any) -> float:
+    try:
+        return float(value)
+    except (TypeError, ValueError):
+        return float("nan")
+
+
+# --- GeoJSON ---------------------------------------------------------------------------------
+
+
+def _geojson_lines(p: Path, text: str) -> list[_Candidate]:
+    try:
+        doc = json.loads(text)
+    except json.JSONDecodeError as exc:
+        raise RouteError(p, f"not valid JSON (line {exc.lineno}: {exc.msg})") from None
+    except RecursionError:
+        raise RouteError(p, "JSON nested too deeply to be a route") from None
+    if not isinstance(doc, dict) or "type" not in doc:
+        raise RouteError(p, "not GeoJSON (no 'type' member)")
+    kind = doc["type"]
+    if kind == "FeatureCollection":
+        feats = doc.get("features")
+        if not isinstance(feats, list):
+            raise RouteError(p, "FeatureCollection without a 'features' list")
+        out = []
+        for i, f in enumerate(feats):
+            line = _geojson_geometry(p, (f or {}).get("geometry") if isinstance(f, dict) else None)
+            if line is not None:
+                props = f.get("properties") or {}
+                name = props.get("name") if isinstance(props, dict) else None
+                out.append(_Candidate(str(name) if name is not None else f"feature {i}", line))
+        return out
+    if kind == "Feature":
+        line = _geojson_geometry(p, doc.get("geometry"))
+        props = doc.get("properties") or {}
+        name = str(props.get("name", "")) if isinstance(props, dict) else ""
+        return [] if line is None else [_Candidate(name, line)]
+    line = _geojson_geometry(p, doc)
+    return [] if line is None else [_Candidate("", line)]
+
+
+def _geojson_geometry(p: Path, geom: Any) -> list[tuple[float, float, float]] | None:
+    if not isinstance(geom, dict):
+        return None
+    kind, coords = geom.get("type"), geom.get("coordinates")
+    if kind == "LineString":
+        parts = [coords]
+    elif kind == "MultiLineString":
+        parts = coords
+    else:
+        return None
+    if not isinstance(parts, list):
+        raise RouteError(p, f"{kind} without a coordinate list")
+    points: list[tuple[float, float, float]] = []
+    for part in parts:
+        if not isinstance(part, list):
+            raise RouteError(p, f"{kind} coordinates are not a list of positions")
+        for pos in part:
+            if not isinstance(pos, list | tuple) or len(pos) < 2:
+                raise RouteError(p, f"{kind} position {pos!r} is not [lon, lat(, alt)]")
+            alt = _num(pos[2]) if len(pos) > 2 else float("nan")
+            points.append((_num(pos[1]), _num(pos[0]), alt))
+    return points
+
+
+# --- XML: GPX and KML ------------------------------------------------------------------------
+
+_UNSAFE_XML = re.compile(r"<!\s*(DOCTYPE|ENTITY)", re.IGNORECASE)
+
+
+def _parse_xml(p: Path, text: str, kind: str) -> ET.Element:
+    if _UNSAFE_XML.search(text):
+        raise RouteError(p, f"{kind} file declares a DOCTYPE or ENTITY; refused for safety")
+    try:
+        return ET.fromstring(text.encode("utf-8"))
+    except ET.ParseError as exc:
+        raise RouteError(p, f"not valid {kind} XML ({exc})") from None
+
+
+def _local(tag: Any) -> str:
+    return tag.rsplit("}", 1)[-1] if isinstance(tag, str) else ""
+
+
+def _children(el: ET.Element, name: str) -> list[ET.Element]:
+    return [c for c in el if _local(c.tag) == name]
+
+
+def _child_text(el: ET.Element, name: str) -> str | None:
+    found = _children(el, name)
+    return found[0].text.strip() if found and found[0].text else None
+
+
+def _gpx_lines(p: Path, text: str) -> list[_Candidate]:
+    root = _parse_xml(p, text, "GPX")
+    if _local(root.tag) != "gpx":
+        raise RouteError(p, f"not a GPX file (root element <{_local(root.tag)}>)")
+
+    def point(el: ET.Element) -> tuple[float, float, float]:
+        ele = _child_text(el, "ele")
+        return (_num(el.get("lat")), _num(el.get("lon")), _num(ele) if ele else float("nan"))
+
+    out = []
+    for i, trk in enumerate(_children(root, "trk")):
+        pts = [point(pt) for seg in _children(trk, "trkseg") for pt in _children(seg, "trkpt")]
+        out.append(_Candidate(_child_text(trk, "name") or f"track {i}", pts))
+    for i, rte in enumerate(_children(root, "rte")):
+        pts = [point(pt) for pt in _children(rte, "rtept")]
+        out.append(_Candidate(_child_text(rte, "name") or f"route {i}", pts))
+    return out
+
+
+def _kml_lines(p: Path, text: str) -> list[_Candidate]:
+    root = _parse_xml(p, text, "KML")
+    if _local(root.tag) != "kml":
+        raise RouteError(p, f"not a KML file (root element <{_local(root.tag)}>)")
+    out = []
+    for i, mark in enumerate(el for el in root.iter() if _local(el.tag) == "Placemark"):
+        lines = [el for el in mark.iter() if _local(el.tag) == "LineString"]
+        pts: list[tuple[float, float, float]] = []
+        for line in lines:
+            for tup in (_child_text(line, "coordinates") or "").split():
+                v = tup.split(",")
+                if len(v) < 2:
+                    raise RouteError(p, f"KML coordinate {tup!r} is not lon,lat[,alt]")
+                pts.append((_num(v[1]), _num(v[0]), _num(v[2]) if len(v) > 2 else float("nan")))
+        if lines:
+            out.append(_Candidate(_child_text(mark, "name") or f"placemark {i}", pts))
+    return out
+
+
+# --- CSV -------------------------------------------------------------------------------------
+
+_LAT = ("lat", "latitude")
+_LON = ("lon", "lng", "long", "longitude")
+_ALT = ("alt", "altitude", "ele", "elevation", "height", "h")
+
+
+def _csv_lines(p: Path, text: str) -> list[_Candidate]:
+    try:
+        dialect = csv.Sniffer().sniff(text[:4096], delimiters=",;\t")
+    except csv.Error:
+        dialect = csv.excel
+    rows = [r for r in csv.reader(io.StringIO(text), dialect) if any(c.strip() for c in r)]
+    header = [c.strip().lower() for c in rows[0]]
+
+    def column(names: tuple[str, ...]) -> int | None:
+        return next((header.index(n) for n in names if n in header), None)
+
+    i_lat, i_lon, i_alt = column(_LAT), column(_LON), column(_ALT)
+    if i_lat is None or i_lon is None:
+        raise RouteError(
+            p,
+            f"CSV header {rows[0]!r} has no lat/lon columns; expected a header with lat,lon[,alt] "
+            "or latitude,longitude",
+        )
+    pts = []
+    for k, row in enumerate(rows[1:], start=2):
+        if len(row) <= max(i_lat, i_lon):
+            raise RouteError(p, f"CSV line {k} has {len(row)} fields, expected {len(header)}")
+        alt = _num(row[i_alt]) if i_alt is not None and i_alt < len(row) else float("nan")
+        lat, lon = _num(row[i_lat]), _num(row[i_lon])
+        if not (np.isfinite(lat) and np.isfinite(lon)):
+            raise RouteError(
+                p, f"CSV line {k}: lat/lon {row[i_lat]!r}, {row[i_lon]!r} are not finite numbers"
+            )
+        pts.append((lat, lon, alt))
+    return [_Candidate("", pts)]

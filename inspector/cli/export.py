@@ -1,0 +1,152 @@
+"""``routefuse export``: the replay, figures, metrics and trajectories of one log, or of many,
+written to files with no browser and no display."""
+
+from __future__ import annotations
+
+import argparse
+import sys
+from pathlib import Path
+
+from estimator.errors import ConfigError, RoutefuseError
+from estimator.io.rosbag import TopicChoice
+from inspector.cli.options import (
+    add_outage_option,
+    add_param_options,
+    add_topic_options,
+    params_from_args,
+    parse_outage,
+)
+
+NAME = "export"
+HELP = (
+    "write a self-contained 3D replay (replay.html), the deviation and trajectory figures, "
+    "metrics, every match attempt and the trajectories (CSV, GeoJSON, TUM) of a log, or of "
+    "every log of a folder with --batch"
+)
+
+
+def add_arguments(parser: argparse.ArgumentParser) -> None:
+    parser.add_argument("log", nargs="?", metavar="LOG", help="ROS 1 .bag, ROS 2 folder or .mcap")
+    parser.add_argument("--route", metavar="ROUTE", help="route file (GeoJSON, GPX, KML, CSV)")
+    parser.add_argument(
+        "--batch",
+        metavar="DIR_OR_GLOB",
+        help="export every log of a folder (or matching a quoted glob); each log's route is "
+        "<stem>.route.geojson beside it",
+    )
+    parser.add_argument(
+        "--route-feature",
+        metavar="NAME_OR_INDEX",
+        default=None,
+        help="which line of a route file that holds several",
+    )
+    parser.add_argument("--out", metavar="DIR", required=True, help="output folder")
+    parser.add_argument(
+        "--method",
+        choices=("proposed", "paper"),
+        default="proposed",
+        help="method compared against the baseline (default proposed)",
+    )
+    add_outage_option(parser)
+    parser.add_argument(
+        "--fps",
+        type=float,
+        default=None,
+        metavar="N",
+        help="replay frames per second of log time (default: up to 2, fewer for long logs so "
+        "the replay keeps about 300 frames)",
+    )
+    parser.add_argument(
+        "--time-lapse",
+        type=float,
+        default=None,
+        metavar="X",
+        help="log seconds per replay second (default: real time, or faster so the replay "
+        "lasts about a minute)",
+    )
+    add_param_options(parser)
+    add_topic_options(parser)
+
+
+class _Progress:
+    """One line per log on stderr, rewritten in place on a terminal."""
+
+    def __init__(self) -> None:
+        self.tty = sys.stderr.isatty()
+        self.last = ""
+        self.stage = ""
+
+    def __call__(self, i: int, n: int, log: Path, stage: str, fraction: float) -> None:
+        prefix = f"[{i + 1}/{n}] " if n > 1 else ""
+        line = f"{prefix}{log.name}: {stage} {100 * fraction:3.0f}%"
+        if self.tty:
+            if line != self.last:
+                end = "\n" if stage in ("done", "failed") else ""
+                print("\r\033[K" + line, end=end, file=sys.stderr, flush=True)
+        elif stage != self.stage:
+            print(line, file=sys.stderr, flush=True)
+        self.last, self.stage = line, stage
+
+
+def execute(args: argparse.Namespace) -> int:
+    from inspector.export.replay import ReplayOptions, export_batch, export_log, find_logs
+    from inspector.export.tables import format_summary
+
+    params = params_from_args(args)
+    outages = tuple(parse_outage(o) for o in args.outage)
+    topics = TopicChoice.from_args(args)
+    replay = ReplayOptions(fps=args.fps, time_lapse=args.time_lapse)
+    progress = _Progress()
+    out = Path(args.out).expanduser()
+    if args.batch is not None:
+        if args.log is not None or args.route is not None:
+            raise ConfigError("--batch", "give either LOG --route ROUTE or --batch, not both")
+        batch = export_batch(
+            find_logs(args.batch),
+            out,
+            params=params,
+            method=args.method,
+            outages=outages,
+            topics=topics,
+            replay=replay,
+            progress=progress,
+        )
+        print(format_summary(batch.items))
+        print(f"summary: {batch.summary_csv}")
+        return 2 if batch.failed else 0
+    if args.log is None:
+        raise ConfigError(None, "give a LOG (with --route ROUTE) or --batch DIR_OR_GLOB")
+    if args.route is None:
+        raise ConfigError(args.log, "give the route with --route ROUTE")
+    log = Path(args.log).expanduser()
+    if not log.exists():
+        raise RoutefuseError(log, "no such file or folder")
+
+    def report(stage: str, fraction: float) -> None:
+        progress(0, 1, log, stage, fraction)
+
+    result = export_log(
+        log,
+        Path(args.route).expanduser(),
+        out,
+        params=params,
+        method=args.method,
+        outages=outages,
+        topics=topics,
+        route_feature=args.route_feature,
+        replay=replay,
+        progress=report,
+    )
+    m = result.metrics
+    if not m["degraded_intervals"]:
+        print("no GNSS-degraded interval in this log: the metrics are empty (use --outage)")
+    for name, row in m["methods"].items():
+        r = row["route"]
+        rmse = "-" if r["rmse_pos_dev_m"] is None else f"{r['rmse_pos_dev_m']:.2f} m"
+        print(f"{name:<9} position deviation RMSE over the outages: {rmse}")
+    print(
+        f"match attempts {m['matches']['attempted']}, accepted {m['matches']['accepted']}; "
+        f"replay {result.frames} frames"
+    )
+    print(f"wrote {len(result.files)} files to {result.out_dir} (open report.html)")
+    return 0

@@ -1,0 +1,68 @@
+"""The ``routefuse`` command: one parser, a subcommand per module."""
+
+from __future__ import annotations
+
+import argparse
+import importlib
+import os
+import sys
+from collections.abc import Sequence
+from types import ModuleType
+
+from estimator.errors import RoutefuseError
+
+COMMANDS = (
+    "inspector.cli.info",
+    "inspector.cli.run",
+    "inspector.cli.simulate",
+    "inspector.cli.serve",
+    "inspector.cli.export",
+    "inspector.cli.bench",
+)
+
+
+def _modules() -> list[ModuleType]:
+    return [importlib.import_module(name) for name in COMMANDS]
+
+
+def build_parser() -> argparse.ArgumentParser:
+    parser = argparse.ArgumentParser(
+        prog="routefuse",
+        description="Keep a ground vehicle localised through GNSS outages by matching the shape "
+        "of its dead-reckoned track to the mission route, and inspect every match in a browser.",
+    )
+    parser.add_argument(
+        "--debug", action="store_true", help="show the full traceback on unexpected errors"
+    )
+    sub = parser.add_subparsers(dest="command", metavar="COMMAND", required=True)
+    for mod in _modules():
+        p = sub.add_parser(mod.NAME, help=mod.HELP, description=mod.HELP)
+        mod.add_arguments(p)
+        p.set_defaults(_execute=mod.execute)
+    return parser
+
+
+def main(argv: Sequence[str] | None = None) -> int:
+    parser = build_parser()
+    args = parser.parse_args(argv)
+    try:
+        return int(args._execute(args) or 0)
+    except RoutefuseError as exc:
+        print(f"routefuse: error: {exc}", file=sys.stderr)
+        return 2
+    except KeyboardInterrupt:
+        print("routefuse: interrupted", file=sys.stderr)
+        return 130
+    except Exception as exc:
+        if args.debug or os.environ.get("ROUTEFUSE_DEBUG"):
+            raise
+        print(
+            f"routefuse: internal error: {type(exc).__name__}: {exc} "
+            "(run with --debug for the traceback)",
+            file=sys.stderr,
+        )
+        return 1
+
+
+if __name__ == "__main__":
+    sys.exit(main())

@@ -1,0 +1,261 @@
+"""``routefuse run LOG --route ROUTE``: run the methods over a log and print the paper's table."""
+
+from __future__ import annotations
+
+import argparse
+import csv
+import json
+import sys
+import time
+from collections.abc import Sequence
+from pathlib import Path
+from typing import Any
+
+import numpy as np
+
+from estimator.errors import ConfigError, RoutefuseError
+from estimator.evaluation.metrics import MethodMetrics, format_table, match_summary, method_metrics
+from estimator.io.rosbag import TopicChoice
+from estimator.log import Log
+from estimator.params import Method
+from estimator.pipeline.inputs import open_inputs
+from estimator.pipeline.runner import run
+from estimator.results import Run
+from inspector.cli.options import (
+    add_outage_option,
+    add_param_options,
+    add_topic_options,
+    params_from_args,
+    parse_outage,
+)
+
+NAME = "run"
+HELP = (
+    "Run the estimator over a log (baseline and proposed by default) and print the paper's "
+    "table of route deviations in the GNSS-degraded intervals, plus truth errors when the log "
+    "has ground truth."
+)
+
+METHODS: tuple[Method, ...] = ("baseline", "proposed", "paper")
+
+
+def add_arguments(parser: argparse.ArgumentParser) -> None:
+    parser.add_argument("log", metavar="LOG", help="ROS 1 .bag, ROS 2 bag folder or .mcap file")
+    parser.add_argument(
+        "--route", metavar="ROUTE", required=True, help="route file (GeoJSON, GPX, KML or CSV)"
+    )
+    parser.add_argument(
+        "--route-feature",
+        metavar="NAME_OR_INDEX",
+        default=None,
+        help="which line of a route file that holds several",
+    )
+    add_outage_option(parser)
+    parser.add_argument(
+        "--method",
+        nargs="+",
+        choices=METHODS,
+        default=None,
+        help="methods to run (default: baseline proposed)",
+    )
+    parser.add_argument("--json", metavar="OUT", type=Path, help="write the results as JSON")
+    parser.add_argument(
+        "--csv", metavar="OUT", type=Path, help="write every method's output epochs as CSV"
+    )
+    parser.add_argument(
+        "--subtract-lane-offset",
+        action="store_true",
+        help="measure route deviations from the learned lane instead of the route line",
+    )
+    parser.add_argument(
+        "--quiet", action="store_true", help="no progress on stderr (errors still print)"
+    )
+    add_topic_options(parser)
+    add_param_options(parser)
+
+
+class _Progress:
+    """One status line on stderr, rewritten in place on a terminal; silent for quick runs."""
+
+    def __init__(self, *, enabled: bool) -> None:
+        self.enabled = enabled
+        self.tty = sys.stderr.isatty()
+        self.started = time.perf_counter()
+        self.shown = False
+        self.last_print = 0.0
+        self.stage = ""
+        self.finished = False
+
+    def __call__(self, stage: str, fraction: float) -> None:
+        if not self.enabled:
+            return
+        now = time.perf_counter()
+        if now - self.started < 1.0 and fraction < 1.0:
+            return
+        new_stage = stage != self.stage
+        if new_stage:
+            self.stage, self.finished = stage, False
+        elif self.finished or (
+            fraction < 1.0 and now - self.last_print < (0.2 if self.tty else 5.0)
+        ):
+            return
+        self.finished = fraction >= 1.0
+        self.last_print, self.shown = now, True
+        line = f"routefuse run: {stage} {100 * min(fraction, 1.0):3.0f}%"
+        if self.tty:
+            print("\r" + line.ljust(50), end="", file=sys.stderr, flush=True)
+        else:
+            print(line, file=sys.stderr, flush=True)
+
+    def done(self) -> None:
+        if self.enabled and self.tty and self.shown:
+            print(file=sys.stderr, flush=True)
+
+
+def _epoch_rows(r: Run) -> list[list[Any]]:
+    e = r.epochs
+    geo = r.frame.to_geodetic(e.position)
+    att = np.degrees(e.attitude)
+    rows = []
+    for i in range(len(e)):
+        rows.append(
+            [
+                r.method,
+                f"{e.t[i] - r.t0:.3f}",
+                f"{geo[i, 0]:.9f}",
+                f"{geo[i, 1]:.9f}",
+                f"{geo[i, 2]:.3f}",
+                *(f"{v:.3f}" for v in e.position[i]),
+                *(f"{v:.3f}" for v in e.velocity[i]),
+                *(f"{v:.3f}" for v in att[i]),
+                *(f"{v:.3f}" for v in e.position_sigma[i]),
+                f"{np.degrees(e.yaw_sigma[i]):.4f}",
+                int(e.gnss_used[i]),
+                int(e.degraded[i]),
+            ]
+        )
+    return rows
+
+
+_CSV_HEADER = [
+    "method", "t_s", "lat_deg", "lon_deg", "height_m", "east_m", "north_m", "up_m",
+    "v_east_m_s", "v_north_m_s", "v_up_m_s", "roll_deg", "pitch_deg", "yaw_deg",
+    "sigma_east_m", "sigma_north_m", "sigma_up_m", "sigma_yaw_deg", "gnss_used", "degraded",
+]  # fmt: skip
+
+
+def _distance(r: Run) -> float:
+    p = r.epochs.position
+    return float(np.sum(np.hypot(*np.diff(p[:, :2], axis=0).T))) if len(p) > 1 else 0.0
+
+
+def results_document(
+    log_path: str | Path,
+    route_path: str | Path,
+    log: Log,
+    runs: dict[str, Run],
+    metrics: dict[str, MethodMetrics],
+    *,
+    outages: Sequence[tuple[float, float]] = (),
+) -> dict[str, Any]:
+    """The ``--json`` document (also written by ``routefuse export`` as metrics.json)."""
+    methods = list(runs)
+    first = next(iter(runs.values()))
+    matching = [m for m in methods if m != "baseline"]
+    summaries = {m: match_summary(runs[m]) for m in matching}
+    key = "proposed" if "proposed" in summaries else (matching[0] if matching else None)
+    return {
+        "log": str(log_path),
+        "route": str(route_path),
+        "duration_s": log.duration_s,
+        "distance_m": _distance(first),
+        "degraded_intervals": [[a - first.t0, b - first.t0] for a, b in first.degraded_intervals],
+        "methods": {m: metrics[m].to_dict() for m in methods},
+        "matches": summaries[key]
+        if key is not None
+        else {"attempted": 0, "accepted": 0, "rejected": {}},
+        "matches_by_method": summaries,
+        "t0": first.t0,
+        "outages": [list(o) for o in outages],
+        "n_epochs": {m: metrics[m].n_epochs for m in methods},
+        "warnings": list(dict.fromkeys(w for r in runs.values() for w in r.warnings)),
+    }
+
+
+def execute(args: argparse.Namespace) -> int:
+    params = params_from_args(args)
+    outages = [parse_outage(o) for o in args.outage]
+    methods: list[Method] = list(dict.fromkeys(args.method or ("baseline", "proposed")))
+    progress = _Progress(enabled=not args.quiet)
+    inputs = open_inputs(
+        Path(args.log),
+        Path(args.route),
+        topics=TopicChoice.from_args(args),
+        route_feature=args.route_feature,
+        progress=lambda f: progress("loading", f),
+    )
+    log, route, frame = inputs.log, inputs.route, inputs.frame
+    assert route is not None
+    for a, b in outages:
+        if a >= log.duration_s:
+            raise ConfigError(
+                "--outage", f"{a:g}:{b:g} starts after the log ends ({log.duration_s:.1f} s)"
+            )
+    runs: dict[str, Run] = {}
+    previous: Run | None = None
+    for method in methods:
+        r = run(
+            log,
+            route,
+            params,
+            method=method,
+            frame=frame,
+            outages=outages,
+            progress=lambda f, m=method: progress(m, f),
+            reuse=previous,
+        )
+        runs[method] = r
+        previous = r
+    progress.done()
+
+    scenario = Path(args.log).name
+    rows, metrics = [], {}
+    for method, r in runs.items():
+        m = method_metrics(
+            r, route, log, subtract_lane_offset=args.subtract_lane_offset, params=r.params
+        )
+        metrics[method] = m
+        rows.append((scenario, method, m))
+    first = next(iter(runs.values()))
+    intervals = [[a - first.t0, b - first.t0] for a, b in first.degraded_intervals]
+    print(format_table(rows))
+    if intervals:
+        spans = ", ".join(f"{a:.1f}-{b:.1f} s" for a, b in intervals)
+        print(f"\nGNSS-degraded: {spans} (metrics over these intervals)")
+    else:
+        print("\nno GNSS-degraded interval in this log: every metric is empty (use --outage)")
+    matching = [m for m in methods if m != "baseline"]
+    summaries = {m: match_summary(runs[m]) for m in matching}
+    for m, s in summaries.items():
+        rejected = ", ".join(f"{k} {v}" for k, v in s["rejected"].items()) or "none"
+        print(f"{m}: {s['accepted']} of {s['attempted']} matches accepted; rejected by {rejected}")
+    warnings = dict.fromkeys(w for r in runs.values() for w in r.warnings)
+    for w in warnings:
+        print(f"routefuse run: warning: {w}", file=sys.stderr)
+
+    if args.json is not None:
+        doc = results_document(args.log, args.route, log, runs, metrics, outages=outages)
+        try:
+            args.json.write_text(json.dumps(doc, indent=2) + "\n", encoding="utf-8")
+        except OSError as exc:
+            raise RoutefuseError(args.json, f"cannot write: {exc.strerror or exc}") from None
+    if args.csv is not None:
+        try:
+            with args.csv.open("w", newline="", encoding="utf-8") as f:
+                w = csv.writer(f)
+                w.writerow(_CSV_HEADER)
+                for r in runs.values():
+                    w.writerows(_epoch_rows(r))
+        except OSError as exc:
+            raise RoutefuseError(args.csv, f"cannot write: {exc.strerror or exc}") from None
+    return 0

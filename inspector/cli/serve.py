@@ -1,0 +1,212 @@
+"""``routefuse serve``: the inspector in the browser."""
+
+from __future__ import annotations
+
+import argparse
+import sys
+import time
+from collections.abc import Sequence
+from pathlib import Path
+
+from estimator.errors import RoutefuseError
+from inspector.cli.options import (
+    add_outage_option,
+    add_param_options,
+    params_from_args,
+    parse_outage,
+)
+
+NAME = "serve"
+HELP = (
+    "open a log and its route in the browser inspector: step the estimator, scrub, debug "
+    "every match attempt, tune parameters live; --outage (or the GNSS outages field) removes "
+    "GNSS from an open-sky log to make it a tunnel test"
+)
+
+SAMPLE_LOGS = Path(__file__).resolve().parents[2] / "sample_logs"
+DEFAULT_SAMPLE = "long_tunnel"
+
+
+def add_arguments(parser: argparse.ArgumentParser) -> None:
+    parser.add_argument(
+        "log",
+        nargs="?",
+        metavar="LOG",
+        help=f"log to open (default: the bundled {DEFAULT_SAMPLE} sample)",
+    )
+    parser.add_argument(
+        "--route", metavar="ROUTE", help="route file (default: LOG's <name>.route.* beside it)"
+    )
+    parser.add_argument(
+        "--host", default="127.0.0.1", help="address to bind (default 127.0.0.1: this machine only)"
+    )
+    parser.add_argument("--port", type=int, default=8080, help="port (default 8080)")
+    parser.add_argument(
+        "--data-dir",
+        metavar="DIR",
+        action="append",
+        default=[],
+        help="also list logs and routes under DIR in the file picker "
+        "(repeatable; the bundled sample_logs are always listed)",
+    )
+    parser.add_argument(
+        "--max-upload-mb",
+        type=float,
+        default=100.0,
+        help="largest file a browser may upload (default 100 MB)",
+    )
+    parser.add_argument(
+        "--method",
+        choices=("proposed", "paper"),
+        default="proposed",
+        help="method compared against the baseline (default proposed)",
+    )
+    add_outage_option(parser)
+    add_param_options(parser)
+
+
+def _route_beside(log: Path) -> Path | None:
+    stem = log.name.split(".")[0]
+    for suffix in (
+        ".route.geojson",
+        ".route.gpx",
+        ".route.kml",
+        ".route.csv",
+        ".geojson",
+        ".gpx",
+        ".kml",
+    ):
+        candidate = log.parent / f"{stem}{suffix}"
+        if candidate.is_file():
+            return candidate
+    return None
+
+
+def resolve_inputs(log: str | None, route: str | None) -> tuple[Path, Path]:
+    """The log and route to open first (the bundled sample when no log is given)."""
+    if log is None:
+        log_path = SAMPLE_LOGS / f"{DEFAULT_SAMPLE}.mcap"
+        if not log_path.exists():
+            raise RoutefuseError(log_path, "the bundled sample log is missing")
+    else:
+        log_path = Path(log).expanduser()
+        if not log_path.exists():
+            raise RoutefuseError(log_path, "no such file or folder")
+    if route is None:
+        found = _route_beside(log_path)
+        if found is None:
+            raise RoutefuseError(log_path, "no route beside the log; give one with --route")
+        route_path = found
+    else:
+        route_path = Path(route).expanduser()
+        if not route_path.is_file():
+            raise RoutefuseError(route_path, "no such file")
+    return log_path.resolve(), route_path.resolve()
+
+
+def start(
+    *,
+    host: str,
+    port: int,
+    data_dirs: list[str | Path],
+    log: Path | None = None,
+    route: Path | None = None,
+    params=None,
+    method="proposed",
+    outages: Sequence[tuple[float, float]] = (),
+    max_upload_bytes: int = 100 * 1024 * 1024,
+    verbose: bool = False,
+):
+    """Start the server and the controller (returns ``(server, controller, app)``; used by the
+    command and by the tests). ``outages`` are injected into the first log only: they are
+    times in that log."""
+    import viser
+
+    from inspector.app import InspectorApp
+    from inspector.controller import Controller, DataFolders, UploadFolder
+
+    roots = [SAMPLE_LOGS, *data_dirs]
+    for d in data_dirs:
+        if not Path(d).is_dir():
+            raise RoutefuseError(d, "--data-dir is not a folder")
+    controller = Controller(
+        DataFolders.of(*roots),
+        uploads=UploadFolder(max_bytes=max_upload_bytes),
+        params=params,
+        method=method,
+    )
+    server = viser.ViserServer(host=host, port=port, verbose=verbose)
+    app = InspectorApp(server, controller)
+    if log is not None and route is not None:
+        controller.open(
+            log,
+            route,
+            log_name=_listed_name(controller, log, "log"),
+            route_name=_listed_name(controller, route, "route"),
+            outages=outages,
+        )
+    return server, controller, app
+
+
+def _listed_name(controller, path: Path, kind: str) -> str:
+    listing = controller.folders.listing()
+    table = listing.logs if kind == "log" else listing.routes
+    for name, p in table.items():
+        if p == path:
+            return name
+    return path.name
+
+
+def execute(args: argparse.Namespace) -> int:
+    from inspector.controller import format_outages
+
+    params = params_from_args(args)
+    outages = tuple(parse_outage(o) for o in args.outage)
+    log, route = resolve_inputs(args.log, args.route)
+    if args.host not in ("127.0.0.1", "localhost", "::1"):
+        print(
+            f"routefuse: warning: binding {args.host}: anyone who can reach this address can "
+            "open the logs under the data folders and upload files",
+            file=sys.stderr,
+        )
+    server, controller, app = start(
+        host=args.host,
+        port=args.port,
+        data_dirs=args.data_dir,
+        log=log,
+        route=route,
+        params=params,
+        method=args.method,
+        outages=outages,
+        max_upload_bytes=int(args.max_upload_mb * 1e6),
+    )
+    shown = "127.0.0.1" if args.host in ("0.0.0.0", "::") else args.host
+    print(f"routefuse inspector: http://{shown}:{server.get_port()}  (Ctrl+C to stop)", flush=True)
+    injected = f" and GNSS outages {format_outages(controller.outages)} s" if outages else ""
+    print(f"loading {log.name} with route {route.name}{injected} ...", flush=True)
+
+    def loaded(session) -> None:
+        tl = session.timeline
+        rejected = int((~tl.match_accepted).sum())
+        print(
+            f"loaded {session.log_name}: {tl.duration:.0f} s, {tl.n_frames} frames, "
+            f"{len(tl.match_t)} match attempts ({rejected} rejected)",
+            flush=True,
+        )
+
+    controller.subscribe(
+        on_session=loaded,
+        on_error=lambda exc: print(f"routefuse: error: {exc}", file=sys.stderr, flush=True),
+    )
+    if controller.session is not None and not controller.busy:
+        loaded(controller.session)
+    try:
+        while True:
+            time.sleep(0.5)
+    except KeyboardInterrupt:
+        pass
+    finally:
+        app.close()
+        controller.close()
+        server.stop()
+    return 0

@@ -1,0 +1,481 @@
+"""Headless export: everything a person needs to look at one run without the inspector open.
+
+:func:`export_log` runs the baseline and the compared method over one log and writes, into one
+folder, a replay of the 3D scene (drawn by the inspector's own scene layers into viser's scene
+serializer, so it shows exactly what the live UI shows), the paper's figures, the metrics, every
+match attempt, and the trajectories as CSV, GeoJSON and TUM. :func:`export_batch` does it for
+many logs and keeps going past a bad one.
+
+Nothing here needs a display or a network: viser's server only binds the loopback interface to
+host the scene API the layers draw into; no browser ever connects to it.
+"""
+
+from __future__ import annotations
+
+import contextlib
+import dataclasses
+import glob
+import io
+import math
+import socket
+import time
+from collections.abc import Callable, Iterator, Sequence
+from dataclasses import dataclass, field
+from pathlib import Path
+from typing import Any
+
+import numpy as np
+from numpy.typing import NDArray
+
+from estimator.errors import ConfigError, RoutefuseError
+from estimator.io.rosbag import AUTO_TOPICS, TopicChoice
+from estimator.params import Method, Params
+from inspector.export import figures as export_figures
+from inspector.export import tables as export_tables
+from inspector.scene_data import SceneData
+
+F64 = NDArray[np.float64]
+Progress = Callable[[str, float], None]
+"""called with the stage being worked on and the fraction of the whole export done"""
+
+DEFAULT_MAX_FRAMES = 300
+"""Frames of the replay when ``fps`` is not given: enough to follow every match attempt of a
+few-minute log, small enough that the page stays a few MB and opens in seconds."""
+DEFAULT_MAX_FPS = 2.0
+"""frames per second of log time when the log is short enough to afford them"""
+DEFAULT_REPLAY_S = 60.0
+"""Length the replay aims at when ``time_lapse`` is not given (never slower than real time)."""
+POSE_MARKER_FRACTION = 0.05
+"""vehicle marker length in the replay, as a fraction of the drive's extent (never smaller
+than the live UI's)"""
+MAX_FRAMES = 20_000
+"""refuse an explicit ``fps`` that would make a replay page of hundreds of MB"""
+
+LOG_SUFFIXES = (".mcap", ".bag")
+ROUTE_SUFFIX = ".route.geojson"
+
+
+@dataclass(frozen=True)
+class ReplayOptions:
+    """How the log's time becomes the replay's frames."""
+
+    fps: float | None = None
+    """frames per second of log time; None: at most ``DEFAULT_MAX_FPS``, fewer for long logs
+    so the replay keeps about ``max_frames`` frames"""
+    time_lapse: float | None = None
+    """log seconds per replay second; None: real time, or faster so the replay lasts
+    ``DEFAULT_REPLAY_S``"""
+    max_frames: int = DEFAULT_MAX_FRAMES
+    """frame budget used when ``fps`` is None"""
+
+
+@dataclass(frozen=True)
+class ExportResult:
+    """What one export wrote and measured."""
+
+    log: Path
+    route: Path
+    out_dir: Path
+    files: tuple[Path, ...]
+    metrics: dict[str, Any]
+    """the ``routefuse run --json`` document"""
+    frames: int
+    """frames in the replay"""
+    timings: dict[str, float] = field(default_factory=dict)
+    """seconds per stage"""
+
+
+@dataclass(frozen=True)
+class BatchItem:
+    """One log of a batch: its result, or the one-line reason it failed."""
+
+    log: Path
+    out_dir: Path
+    result: ExportResult | None
+    error: str | None
+    seconds: float
+
+    @property
+    def ok(self) -> bool:
+        return self.error is None
+
+
+@dataclass(frozen=True)
+class BatchResult:
+    items: tuple[BatchItem, ...]
+    summary_csv: Path
+
+    @property
+    def failed(self) -> tuple[BatchItem, ...]:
+        return tuple(i for i in self.items if not i.ok)
+
+
+# ---------------------------------------------------------------------------------------------
+# one log
+
+
+def export_log(
+    log_path: str | Path,
+    route_path: str | Path,
+    out_dir: str | Path,
+    *,
+    params: Params | None = None,
+    method: Method = "proposed",
+    outages: Sequence[tuple[float, float]] = (),
+    topics: TopicChoice = AUTO_TOPICS,
+    route_feature: str | int | None = None,
+    replay: ReplayOptions = ReplayOptions(),
+    progress: Progress | None = None,
+) -> ExportResult:
+    """Run the baseline and ``method`` over one log and write every export file into
+    ``out_dir`` (created if missing; files of an earlier export are overwritten).
+
+    ``outages``: (start, end) seconds after the log start where GNSS is removed, as
+    ``routefuse run --outage``. ``route_feature``: which line of a route file holding several
+    (name or index)."""
+    from estimator.pipeline.inputs import open_inputs
+    from estimator.pipeline.runner import run
+
+    log_path, route_path, out = Path(log_path), Path(route_path), Path(out_dir)
+    params = params or Params()
+    _check_replay_options(replay)
+    _make_dir(out)  # before the runs: a bad --out fails at once
+    report = progress or (lambda stage, fraction: None)
+    timings: dict[str, float] = {}
+    clock = time.perf_counter()
+
+    def stage(name: str, lo: float, hi: float) -> Callable[[float], None]:
+        return lambda f: report(name, lo + (hi - lo) * float(np.clip(f, 0.0, 1.0)))
+
+    def lap(name: str) -> None:
+        nonlocal clock
+        now = time.perf_counter()
+        timings[name] = now - clock
+        clock = now
+
+    inputs = open_inputs(
+        log_path,
+        route_path,
+        topics=topics,
+        route_feature=route_feature,
+        progress=stage("loading", 0, 0.2),
+    )
+    lap("load_s")
+    for a, b in outages:
+        if a >= inputs.log.duration_s:
+            raise ConfigError(
+                "--outage",
+                f"{a:g}:{b:g} starts after the log ends ({inputs.log.duration_s:.1f} s)",
+            )
+    baseline = run(
+        inputs.log,
+        inputs.route,
+        params,
+        method="baseline",
+        frame=inputs.frame,
+        outages=outages,
+        progress=stage("baseline run", 0.2, 0.35),
+    )
+    compared = run(
+        inputs.log,
+        inputs.route,
+        params,
+        method=method,
+        frame=inputs.frame,
+        outages=outages,
+        progress=stage(f"{method} run", 0.35, 0.55),
+        reuse=baseline,
+    )
+    lap("run_s")
+    try:
+        report("tables", 0.55)
+        doc = export_tables.metrics_document(
+            inputs, baseline, compared, log_path, route_path, outages=outages
+        )
+        files = export_tables.write_tables(out, inputs, baseline, compared, doc)
+        lap("tables_s")
+        report("figures", 0.65)
+        scene = SceneData.build(
+            baseline=baseline, proposed=compared, route=inputs.route, log=inputs.log
+        )
+        files += export_figures.write_figures(out, inputs, baseline, compared, scene)
+        lap("figures_s")
+        frames = replay_times(scene, replay)
+        files += write_replay(
+            out,
+            scene,
+            frames,
+            degraded=compared.degraded_intervals,
+            time_lapse=_time_lapse(frames, replay),
+            progress=stage("replay", 0.75, 0.98),
+        )
+        lap("replay_s")
+        files += (export_tables.write_report(out, doc, files, timings),)
+    except OSError as exc:
+        where = exc.filename or out
+        raise RoutefuseError(where, f"cannot write: {exc.strerror or exc}") from None
+    report("done", 1.0)
+    return ExportResult(
+        log=log_path,
+        route=route_path,
+        out_dir=out,
+        files=files,
+        metrics=doc,
+        frames=len(frames),
+        timings=timings,
+    )
+
+
+def _make_dir(path: Path) -> None:
+    try:
+        path.mkdir(parents=True, exist_ok=True)
+    except OSError as exc:
+        raise RoutefuseError(path, f"cannot create the output folder: {exc.strerror}") from None
+
+
+def _check_replay_options(o: ReplayOptions) -> None:
+    if o.fps is not None and not (math.isfinite(o.fps) and o.fps > 0):
+        raise ConfigError("--fps", f"must be a positive number of frames per second, not {o.fps}")
+    if o.time_lapse is not None and not (math.isfinite(o.time_lapse) and o.time_lapse > 0):
+        raise ConfigError("--time-lapse", f"must be a positive factor, not {o.time_lapse}")
+    if o.max_frames < 2:
+        raise ConfigError("max_frames", f"must be at least 2, not {o.max_frames}")
+
+
+# ---------------------------------------------------------------------------------------------
+# the replay
+
+
+def replay_times(scene: SceneData, options: ReplayOptions = ReplayOptions()) -> F64:
+    """Absolute log times of the replay's frames: an even grid over the run plus the time of
+    every match attempt (so each attempt is drawn once, however the grid falls), thinned
+    evenly to fit the frame budget when ``fps`` is not given."""
+    t = scene.proposed.t
+    if len(t) == 0:
+        return np.zeros(0)
+    t_start, t_end = float(t[0]), float(t[-1])
+    span = t_end - t_start
+    attempts = scene.match_t[(scene.match_t >= t_start) & (scene.match_t <= t_end)]
+    if options.fps is None:
+        keep = min(len(attempts), options.max_frames // 2)
+        if keep < len(attempts):
+            attempts = attempts[np.linspace(0, len(attempts) - 1, keep).round().astype(int)]
+        budget = options.max_frames - len(attempts) - 1
+        fps = DEFAULT_MAX_FPS if span <= 0 else min(DEFAULT_MAX_FPS, budget / span)
+    else:
+        fps = options.fps
+        if span * fps > MAX_FRAMES:
+            raise ConfigError(
+                "--fps",
+                f"{fps:g} frames per second over {span:.0f} s of log makes "
+                f"{span * fps:.0f} frames (at most {MAX_FRAMES})",
+            )
+    n = max(math.floor(span * fps), 1)
+    grid = t_start + np.arange(n) * (span / n)
+    return np.unique(np.concatenate([grid, attempts, [t_end]]))
+
+
+def _time_lapse(frames: F64, options: ReplayOptions) -> float:
+    if options.time_lapse is not None:
+        return options.time_lapse
+    span = float(frames[-1] - frames[0]) if len(frames) > 1 else 0.0
+    return max(1.0, span / DEFAULT_REPLAY_S)
+
+
+@contextlib.contextmanager
+def headless_server() -> Iterator[Any]:
+    """A viser server on a free loopback port, its console banner silenced; stopped on exit."""
+    import viser
+
+    try:
+        with socket.socket() as s:
+            s.bind(("127.0.0.1", 0))
+            port = s.getsockname()[1]
+        with contextlib.redirect_stdout(io.StringIO()):
+            server = viser.ViserServer(host="127.0.0.1", port=port, verbose=False)
+    except OSError as exc:
+        raise RoutefuseError(
+            "127.0.0.1", f"cannot open a loopback port to record the replay: {exc.strerror or exc}"
+        ) from None
+    try:
+        yield server
+    finally:
+        with contextlib.redirect_stdout(io.StringIO()):
+            server.stop()
+
+
+def write_replay(
+    out_dir: Path,
+    scene: SceneData,
+    frames: F64,
+    *,
+    degraded: Sequence[tuple[float, float]] = (),
+    time_lapse: float = 1.0,
+    progress: Callable[[float], None] | None = None,
+) -> tuple[Path, ...]:
+    """Draw ``scene`` at each frame time with the inspector's layers under viser's scene
+    serializer; write ``replay.html`` (self-contained, plays from file://) and
+    ``replay.viser`` (for viser's own player). The verdict markers appear as their attempts
+    happen; a label gives the log time and whether GNSS is out (inside ``degraded``, absolute
+    (start, end) times)."""
+    from inspector.layers import SceneLayers, TrackLayer
+
+    html_path, viser_path = out_dir / "replay.html", out_dir / "replay.viser"
+    with headless_server() as server:
+        # Two recordings of the same messages: as_html() consumes the serializer it is
+        # called on, and the page and the .viser file are both wanted.
+        recorders = (server.get_scene_serializer(), server.get_scene_serializer())
+        _place_camera(server, scene)
+        layers = SceneLayers(server.scene)
+        layers.set_data(scene)
+        marker_scale = max(1.0, POSE_MARKER_FRACTION * scene.extent_m / TrackLayer.length_m)
+        for layer in layers.layers.values():
+            if isinstance(layer, TrackLayer):
+                layer.set_pose_scale(marker_scale)
+        verdicts = layers.layers["verdicts"]
+        clock = server.scene.add_label(
+            "/routefuse/export/clock",
+            "",
+            position=_clock_anchor(scene),
+            anchor="top-center",
+            font_screen_scale=1.2,
+        )
+        shown = -1
+        for i, t in enumerate(frames):
+            n_done = int(np.searchsorted(scene.match_t, t + 1e-9, side="right"))
+            if n_done != shown:
+                verdicts.set_data(_first_attempts(scene, n_done))
+                shown = n_done
+            layers.draw(float(t))
+            state = "GNSS outage" if any(a <= t <= b for a, b in degraded) else "GNSS"
+            clock.text = f"t = {t - scene.t0:6.1f} s   {state}   attempts {n_done}"
+            if i + 1 < len(frames):
+                for rec in recorders:
+                    rec.insert_sleep(float(frames[i + 1] - t) / time_lapse)
+            if progress is not None and i % 20 == 0:
+                progress(i / len(frames))
+        for rec in recorders:
+            rec.insert_sleep(1.0)  # hold the last frame a moment before the player loops
+        html = recorders[0].as_html()
+        data = recorders[1].serialize()
+    html_path.write_text(html, encoding="utf-8")
+    viser_path.write_bytes(data)
+    if progress is not None:
+        progress(1.0)
+    return html_path, viser_path
+
+
+def _first_attempts(scene: SceneData, n: int) -> SceneData:
+    """The scene with only its first ``n`` match attempts (what the verdict layer shows at a
+    time after them)."""
+    return dataclasses.replace(
+        scene,
+        matches=scene.matches[:n],
+        match_t=scene.match_t[:n],
+        match_xy=scene.match_xy[:n],
+        match_accepted=scene.match_accepted[:n],
+    )
+
+
+def _clock_anchor(scene: SceneData) -> tuple[float, float, float]:
+    """Top middle of the overview (clear of the corner where the browser shows notices)."""
+    return (float(scene.center[0]), float(scene.center[1] + 0.55 * scene.extent_m), 1.0)
+
+
+def _place_camera(server: Any, scene: SceneData) -> None:
+    """Top-down over the whole drive, north up (the live UI's overview, without its panel)."""
+    cam = server.initial_camera
+    fov = float(cam.fov)
+    height = 0.6 * scene.extent_m / math.tan(fov / 2)
+    cx, cy = float(scene.center[0]), float(scene.center[1])
+    cam.far = max(10 * height, 1000.0)
+    cam.near = max(height / 2000, 0.05)
+    cam.up = (0.0, 0.0, 1.0)
+    cam.position = (cx, cy - 0.001 * height, height)
+    cam.look_at = (cx, cy, 0.0)
+
+
+# ---------------------------------------------------------------------------------------------
+# many logs
+
+
+def find_logs(spec: str | Path) -> list[Path]:
+    """The logs a batch covers: the ``.mcap``/``.bag`` files and ROS 2 bag folders directly in
+    a folder, or whatever a glob pattern matches."""
+    p = Path(spec).expanduser()
+    if p.is_dir():
+        found = [
+            c
+            for c in sorted(p.iterdir())
+            if (c.is_file() and c.suffix.lower() in LOG_SUFFIXES)
+            or (c.is_dir() and (c / "metadata.yaml").is_file())
+        ]
+    else:
+        found = [Path(m) for m in sorted(glob.glob(str(p)))]
+        found = [m for m in found if not m.name.endswith(ROUTE_SUFFIX)]
+    if not found:
+        raise RoutefuseError(spec, "no logs found (a folder of .mcap/.bag files, or a glob)")
+    return found
+
+
+def route_beside(log: Path) -> Path:
+    """``<stem>.route.geojson`` next to the log, as the sample logs are named."""
+    stem = log.name.split(".")[0]
+    route = log.parent / f"{stem}{ROUTE_SUFFIX}"
+    if not route.is_file():
+        raise RoutefuseError(log, f"no route {route.name} beside the log")
+    return route
+
+
+def export_batch(
+    logs: Sequence[Path],
+    out_dir: str | Path,
+    *,
+    params: Params | None = None,
+    method: Method = "proposed",
+    outages: Sequence[tuple[float, float]] = (),
+    topics: TopicChoice = AUTO_TOPICS,
+    replay: ReplayOptions = ReplayOptions(),
+    progress: Callable[[int, int, Path, str, float], None] | None = None,
+) -> BatchResult:
+    """Export each log into ``out_dir/<stem>/`` and write ``out_dir/summary.csv``. A log that
+    fails (no route beside it, unreadable, ...) is recorded with its one-line error and the
+    batch goes on. ``progress(i, n, log, stage, fraction)``."""
+    out = Path(out_dir)
+    _make_dir(out)
+    items: list[BatchItem] = []
+    used: set[str] = set()
+    for i, log in enumerate(logs):
+        name = log.name.split(".")[0] or "log"
+        folder, k = name, 2
+        while folder in used:
+            folder, k = f"{name}-{k}", k + 1
+        used.add(folder)
+        target = out / folder
+        started = time.perf_counter()
+
+        def report(stage: str, fraction: float, i: int = i, log: Path = log) -> None:
+            if progress is not None:
+                progress(i, len(logs), log, stage, fraction)
+
+        result, error = None, None
+        try:
+            result = export_log(
+                log,
+                route_beside(log),
+                target,
+                params=params,
+                method=method,
+                outages=outages,
+                topics=topics,
+                replay=replay,
+                progress=report,
+            )
+        except RoutefuseError as exc:
+            error = str(exc)
+        except Exception as exc:  # one broken log must not stop the batch
+            error = f"{log}: internal error: {type(exc).__name__}: {exc}"
+        items.append(BatchItem(log, target, result, error, time.perf_counter() - started))
+        report("failed" if error else "done", 1.0)
+    summary = export_tables.write_summary(out / "summary.csv", items)
+    return BatchResult(tuple(items), summary)
