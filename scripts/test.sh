@@ -1,6 +1,7 @@
 #!/usr/bin/env bash
 # Install everything the test suite needs (Debian's chromium for the browser tests, the package
-# with its test extras) and run lint plus the whole suite. Extra arguments go to pytest.
+# with its test extras) and run lint, the type checker and the whole suite. Extra arguments go
+# to pytest.
 set -euo pipefail
 cd "$(dirname "$0")/.."
 
@@ -16,6 +17,9 @@ python3 -m pip install -q --disable-pip-version-check -e '.[test]'
 
 echo "== ruff"
 python3 -m ruff check estimator inspector tests benchmarks scripts
+
+echo "== mypy (strict on estimator/)"
+python3 -m mypy
 
 echo "== pytest"
 python3 -m pytest -q "$@"

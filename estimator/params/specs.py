@@ -1,0 +1,191 @@
+"""The parameter tree's leaves as specs, and their conversion from CLI strings, TOML values and GUI
+widgets: every value that enters :class:`~estimator.params.Params` is checked here against the
+type, bounds and choices its declaration gives."""
+
+from __future__ import annotations
+
+import dataclasses
+import tomllib
+from collections.abc import Iterator
+from dataclasses import dataclass, fields, is_dataclass, replace
+from pathlib import Path
+from typing import Any, get_args, get_type_hints
+
+import tomli_w
+
+from estimator.errors import ConfigError
+from estimator.params.declarations import Params
+
+
+@dataclass(frozen=True)
+class ParamSpec:
+    """One leaf parameter: its dotted name, type, default and presentation metadata."""
+
+    name: str
+    group: str
+    type: Any
+    default: Any
+    doc: str
+    unit: str
+    lo: float | None
+    hi: float | None
+    step: float | None
+    choices: tuple[str, ...] | None
+
+
+def param_specs(cls: type = Params, prefix: str = "") -> Iterator[ParamSpec]:
+    """Every leaf parameter of the tree, in declaration order."""
+    hints = get_type_hints(cls)
+    for f in fields(cls):
+        tp = hints[f.name]
+        if isinstance(tp, type) and is_dataclass(tp):
+            yield from param_specs(tp, f"{prefix}{f.name}.")
+            continue
+        default = f.default
+        if default is dataclasses.MISSING and f.default_factory is not dataclasses.MISSING:
+            default = f.default_factory()
+        m = f.metadata
+        yield ParamSpec(
+            name=f"{prefix}{f.name}",
+            group=prefix.rstrip(".") or "general",
+            type=tp,
+            default=default,
+            doc=m.get("doc", ""),
+            unit=m.get("unit", ""),
+            lo=m.get("lo"),
+            hi=m.get("hi"),
+            step=m.get("step"),
+            choices=m.get("choices") or _literal(tp),
+        )
+
+
+def _literal(tp: Any) -> tuple[str, ...] | None:
+    args = get_args(tp)
+    return tuple(args) if args and all(isinstance(a, str) for a in args) else None
+
+
+def get_param(params: Params, name: str) -> Any:
+    obj: Any = params
+    for part in name.split("."):
+        obj = getattr(obj, part)
+    return obj
+
+
+def _spec(name: str) -> ParamSpec:
+    for s in param_specs():
+        if s.name == name:
+            return s
+    known = ", ".join(s.name for s in param_specs())
+    raise ConfigError(None, f"unknown parameter {name!r} (known: {known})")
+
+
+def coerce_value(spec: ParamSpec, value: Any, source: str | None = None) -> Any:
+    """Convert and check one value (from TOML, a CLI string or a GUI widget)."""
+    where = source or spec.name
+    tp = spec.type
+    try:
+        if tp is bool:
+            if isinstance(value, str):
+                if value.lower() not in ("true", "false", "1", "0", "yes", "no", "on", "off"):
+                    raise ValueError(value)
+                value = value.lower() in ("true", "1", "yes", "on")
+            return bool(value)
+        if tp is int:
+            out: Any = int(value)
+        elif tp is float or tp == (float | None):
+            if value is None or (isinstance(value, str) and value.lower() in ("none", "")):
+                if tp is float:
+                    raise ValueError("a number is required")
+                return None
+            out = float(value)
+        elif str(tp).startswith("tuple"):
+            items = value.split(",") if isinstance(value, str) else list(value)
+            out = tuple(float(v) for v in items)
+            if len(out) != len(spec.default):
+                raise ValueError(f"expected {len(spec.default)} numbers")
+            return out
+        else:
+            out = str(value)
+    except (TypeError, ValueError) as exc:
+        raise ConfigError(where, f"{spec.name}: invalid value {value!r} ({exc})") from None
+    if isinstance(out, float) and out != out:
+        raise ConfigError(where, f"{spec.name}: NaN is not a valid value")
+    if spec.choices and out not in spec.choices:
+        raise ConfigError(where, f"{spec.name}: {out!r} is not one of {spec.choices}")
+    number = isinstance(out, int | float) and not isinstance(out, bool)
+    too_low = number and spec.lo is not None and out < spec.lo
+    too_high = number and spec.hi is not None and out > spec.hi
+    if too_low or too_high:
+        raise ConfigError(where, f"{spec.name}={out} is outside [{spec.lo}, {spec.hi}]")
+    return out
+
+
+def with_values(params: Params, values: dict[str, Any], source: str | None = None) -> Params:
+    """A copy of ``params`` with dotted-name values replaced (checked and converted)."""
+    for name, raw in values.items():
+        spec = _spec(name)
+        params = _replace_path(params, name.split("."), coerce_value(spec, raw, source))
+    return params
+
+
+def _replace_path(obj: Any, path: list[str], value: Any) -> Any:
+    if len(path) == 1:
+        return replace(obj, **{path[0]: value})
+    return replace(obj, **{path[0]: _replace_path(getattr(obj, path[0]), path[1:], value)})
+
+
+def parse_assignments(items: list[str]) -> dict[str, str]:
+    """``["gates.max_residual_m=2.5", ...]`` from ``--set`` into a dict."""
+    out: dict[str, str] = {}
+    for item in items:
+        name, sep, value = item.partition("=")
+        if not sep:
+            raise ConfigError(None, f"--set expects NAME=VALUE, got {item!r}")
+        out[name.strip()] = value.strip()
+    return out
+
+
+def load_params(path: str | Path, base: Params | None = None) -> Params:
+    """Parameters from a TOML file (tables named like the groups; unknown keys are errors)."""
+    path = Path(path)
+    try:
+        data = tomllib.loads(path.read_text(encoding="utf-8"))
+    except OSError as exc:
+        raise ConfigError(path, f"cannot read config: {exc.strerror or exc}") from None
+    except (tomllib.TOMLDecodeError, UnicodeDecodeError) as exc:
+        raise ConfigError(path, f"not valid TOML: {exc}") from None
+    flat: dict[str, Any] = {}
+
+    def walk(d: dict[str, Any], prefix: str) -> None:
+        for k, v in d.items():
+            if isinstance(v, dict):
+                walk(v, f"{prefix}{k}.")
+            else:
+                flat[f"{prefix}{k}"] = v
+
+    walk(data, "")
+    known = {s.name for s in param_specs()}
+    for name in flat:
+        if name not in known:
+            raise ConfigError(path, f"unknown parameter {name!r}")
+    return with_values(base or Params(), flat, str(path))
+
+
+def params_to_toml(params: Params) -> str:
+    """TOML text that :func:`load_params` reads back to an equal ``Params``."""
+    tree: dict[str, Any] = {}
+    for spec in param_specs():
+        value = get_param(params, spec.name)
+        if value is None:
+            continue
+        *groups, leaf = spec.name.split(".")
+        node = tree
+        for g in groups:
+            node = node.setdefault(g, {})
+        node[leaf] = list(value) if isinstance(value, tuple) else value
+    head = "# routefuse estimator parameters (routefuse run --config FILE)\n"
+    return head + tomli_w.dumps(tree)
+
+
+def save_params(params: Params, path: str | Path) -> None:
+    Path(path).write_text(params_to_toml(params), encoding="utf-8")
