@@ -4,7 +4,8 @@ inspector can draw any instant without re-running the filter."""
 from __future__ import annotations
 
 from dataclasses import dataclass, field
-from typing import Literal
+from enum import Enum
+from typing import TYPE_CHECKING, Literal
 
 import numpy as np
 from numpy.typing import NDArray
@@ -12,21 +13,140 @@ from numpy.typing import NDArray
 from estimator.nav.frames import LocalFrame
 from estimator.params import Method, Params
 
+if TYPE_CHECKING:
+    from estimator.pipeline.reuse import ReuseState
+
 F64 = NDArray[np.float64]
 
 Comparison = Literal["<=", ">="]
 
 
+class Rival(Enum):
+    """A road the matched window could also belong to: the route shifted sideways by
+    ``gates.alternative_shift_m`` (a parallel carriageway) or driven the other way."""
+
+    LEFT = "left"
+    RIGHT = "right"
+    REVERSED = "reversed"
+
+
+class Gate(Enum):
+    """Every gate a match attempt can hold, in the order the matcher evaluates them."""
+
+    MIN_PAIRS = "min_pairs"
+    HEADING = "heading"
+    RESIDUAL = "residual"
+    ROTATION = "rotation"
+    MAHALANOBIS = "mahalanobis"
+    LANE_CONTINUITY = "lane_continuity"
+    ALTERNATIVE_LEFT = "alternative_left"
+    ALTERNATIVE_RIGHT = "alternative_right"
+    ALTERNATIVE_REVERSED = "alternative_reversed"
+    CORRECTION_CAP = "correction_cap"
+
+    @property
+    def rival(self) -> Rival | None:
+        """The rival an ``ALTERNATIVE_*`` gate compares the candidate with (else None)."""
+        return _GATE_RIVALS.get(self)
+
+    @property
+    def refuses_off_route(self) -> bool:
+        """A failure means the road is ambiguous (a rival fits as well) or the vehicle moved
+        across the route away from its lane: the attempt is refused as off-route."""
+        return self is Gate.LANE_CONTINUITY or self.rival is not None
+
+    @classmethod
+    def alternative(cls, rival: Rival) -> Gate:
+        return cls("alternative_" + rival.value)
+
+
+_GATE_RIVALS = {Gate.alternative(r): r for r in Rival}
+
+
 @dataclass(frozen=True)
 class GateDecision:
-    """One gate of one match attempt: ``passed`` is ``value <comparison> threshold``."""
+    """One gate of one match attempt: ``passed`` is ``value <comparison> threshold``.
 
-    name: str
+    An ``ALTERNATIVE_*`` gate's value is the rival's cost minus the candidate's; it is +inf
+    (``no_rival``) when the rival fails the shape gates, so there is nothing to confuse the
+    candidate with."""
+
+    gate: Gate
     value: float
     threshold: float
     comparison: Comparison
     passed: bool
     note: str = ""
+
+    @property
+    def name(self) -> str:
+        return self.gate.value
+
+    @property
+    def no_rival(self) -> bool:
+        return self.gate.rival is not None and self.value == float("inf")
+
+
+@dataclass(frozen=True)
+class FitSummary:
+    """What the registration of a window found beyond its pose: along-track observability,
+    the route direction at the pseudo-position, and the innovation in route axes."""
+
+    along_offset_m: float
+    """along-track shift of the route pairs the search chose, m"""
+    along_curvature: float
+    """curvature of the mean squared residual over the along-track shift at its minimum"""
+    along_sigma_m: float
+    """1-sigma of the along-track shift (``pseudo.along_sigma_max_m`` when unobserved)"""
+    along_observed: bool
+    """route shape observes along-track here; when False, the along-track axis of the
+    observation carries no information and is applied as unobserved"""
+    cross_sigma_m: float
+    lane_path: bool
+    """the window was matched to the lane line (the route shifted by the lane offset)"""
+    innovation_along_m: float
+    innovation_cross_m: float
+    normal: F64
+    """(2,) unit route normal at the pseudo-position, pointing LEFT of the route direction"""
+    heading_sigma_rad: float
+    """1-sigma of the fitted rotation read as a heading correction"""
+
+    def diagnostics(self) -> dict[str, float]:
+        return {
+            "along_offset_m": self.along_offset_m,
+            "along_curvature": self.along_curvature,
+            "along_sigma_m": self.along_sigma_m,
+            "along_observed": float(self.along_observed),
+            "cross_sigma_m": self.cross_sigma_m,
+            "lane_path": float(self.lane_path),
+            "innovation_along_m": self.innovation_along_m,
+            "innovation_cross_m": self.innovation_cross_m,
+            "normal_e": float(self.normal[0]),
+            "normal_n": float(self.normal[1]),
+            "heading_sigma_rad": self.heading_sigma_rad,
+        }
+
+
+@dataclass(frozen=True)
+class LongWindow:
+    """An accepted match that left along-track unobserved, replaced by the match of a longer
+    window that observed it (``extensions.long_window``)."""
+
+    turn_deg: float
+    """largest turn of the long window over a standard window's length"""
+    short_window_length_m: float
+
+
+@dataclass(frozen=True)
+class HeadingObservation:
+    """The yaw observation an accepted match's fitted rotation was applied as
+    (``extensions.heading_observation``)."""
+
+    yaw_rad: float
+    """innovation: the fitted rotation"""
+    sigma_rad: float
+    correction_rad: float
+    """yaw change the update applied"""
 
 
 @dataclass(frozen=True)
@@ -34,7 +154,7 @@ class MatchRecord:
     """One match attempt with every intermediate, accepted or not.
 
     Arrays are EN metres in the run's local frame. Fields that a failed early gate never
-    computed are NaN (scalars) or empty arrays.
+    computed are NaN (scalars), empty arrays or None.
     """
 
     index: int
@@ -55,7 +175,7 @@ class MatchRecord:
     rotation_rad: float
     translation: F64
     """(2,) t of the fit R s_i + t ~ route_points; R p_dr + t is p_ref, or z when the window was
-    matched to the lane line (the route shifted by the lane offset, ``extra["lane_path"] = 1``)"""
+    matched to the lane line (``fit.lane_path``)"""
     residual_m: float
     """RMS of |R s_i + t - t_i|"""
     heading_cos: float
@@ -73,8 +193,16 @@ class MatchRecord:
     """(2,) z - H x before the update"""
     correction: F64
     """(2,) position change the update applied (zeros when rejected)"""
+    anchor_s: float = float("nan")
+    """route arc length where the window's first point projects, m"""
+    window_length_m: float = float("nan")
+    """arc length of the resampled DR window, m"""
+    fit: FitSummary | None = None
+    """None when the window could not be registered (too short, off the route)"""
+    long_window: LongWindow | None = None
+    heading_observation: HeadingObservation | None = None
     extra: dict[str, float] = field(default_factory=dict)
-    """method-specific scalars (along-track search, alternatives' residuals, ...)"""
+    """free-form scalars for display (candidate validation's chi-square and costs, ...)"""
 
     @property
     def failed_gates(self) -> tuple[GateDecision, ...]:
@@ -87,6 +215,38 @@ class MatchRecord:
             return "accepted"
         failed = self.failed_gates
         return f"rejected: {failed[0].name}" if failed else "rejected"
+
+    @property
+    def along_observed(self) -> bool:
+        """The fit observed along-track (False without a fit)."""
+        return self.fit is not None and self.fit.along_observed
+
+    @property
+    def normal(self) -> F64:
+        """(2,) unit route normal at the pseudo-position (NaN without a fit)."""
+        return np.full(2, np.nan) if self.fit is None else self.fit.normal
+
+    def diagnostics(self) -> dict[str, float]:
+        """Every scalar of the attempt beyond the fixed fields, by name, in a stable order
+        (the export's ``extra_*`` columns, the match panel's rows); unknown (NaN) anchor and
+        window length are left out."""
+        out = {
+            k: v
+            for k, v in (("anchor_s", self.anchor_s), ("window_length_m", self.window_length_m))
+            if not np.isnan(v)
+        }
+        if self.fit is not None:
+            out.update(self.fit.diagnostics())
+        out.update(self.extra)
+        if self.long_window is not None:
+            out["long_window"] = 1.0
+            out["long_window_turn_deg"] = self.long_window.turn_deg
+            out["short_window_length_m"] = self.long_window.short_window_length_m
+        if self.heading_observation is not None:
+            out["heading_obs_rad"] = self.heading_observation.yaw_rad
+            out["heading_obs_sigma_rad"] = self.heading_observation.sigma_rad
+            out["heading_correction_rad"] = self.heading_observation.correction_rad
+        return out
 
 
 @dataclass(frozen=True)
@@ -134,6 +294,6 @@ class Run:
     dropped_fix_times: tuple[float, ...] = ()
     """fixes the fixed-lag re-run at the start of an outage left out (they disagreed with
     dead reckoning; ``extensions.portal_rerun``)"""
-    resume: object = field(default=None, repr=False, compare=False)
-    """opaque checkpoints that let ``runner.run(..., reuse=this_run)`` restart at the first
-    match attempt a parameter change affects; None when the run kept none"""
+    _reuse: ReuseState | None = field(default=None, repr=False, compare=False)
+    """private to :mod:`estimator.pipeline`: the checkpoints that let ``run(..., reuse=this_run)``
+    restart at the first match attempt a parameter change affects (None: the run kept none)"""

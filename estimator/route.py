@@ -38,8 +38,10 @@ class Route:
     source: str = ""
     s: F64 = field(init=False, repr=False)
     warnings: tuple[str, ...] = field(init=False, repr=False, compare=False)
-    _unit: F64 = field(init=False, repr=False)
-    _seglen: F64 = field(init=False, repr=False)
+    unit: F64 = field(init=False, repr=False)
+    """(K, 2) unit direction of each segment"""
+    seglen: F64 = field(init=False, repr=False)
+    """(K,) segment lengths, m"""
 
     def __post_init__(self) -> None:
         xy = np.asarray(self.xy, dtype=np.float64)
@@ -69,8 +71,8 @@ class Route:
         seglen = np.hypot(seg[:, 0], seg[:, 1])
         xy.setflags(write=False)
         object.__setattr__(self, "xy", xy)
-        object.__setattr__(self, "_seglen", seglen)
-        object.__setattr__(self, "_unit", seg / seglen[:, None])
+        object.__setattr__(self, "seglen", seglen)
+        object.__setattr__(self, "unit", seg / seglen[:, None])
         object.__setattr__(self, "s", np.r_[0.0, np.cumsum(seglen)])
 
     @property
@@ -79,17 +81,17 @@ class Route:
 
     def _segment_index(self, s: F64) -> NDArray[np.intp]:
         i = np.searchsorted(self.s, s, side="right") - 1
-        return np.clip(i, 0, len(self._seglen) - 1)
+        return np.clip(i, 0, len(self.seglen) - 1)
 
     def point_at(self, s: ArrayLike) -> F64:
         """(N, 2) points at arc lengths; beyond the ends the end segments are extended."""
         s_a = np.atleast_1d(np.asarray(s, np.float64))
         i = self._segment_index(s_a)
-        return self.xy[i] + (s_a - self.s[i])[:, None] * self._unit[i]
+        return self.xy[i] + (s_a - self.s[i])[:, None] * self.unit[i]
 
     def tangent_at(self, s: ArrayLike) -> F64:
         """(N, 2) unit tangents (of the segment the arc length falls in)."""
-        return self._unit[self._segment_index(np.atleast_1d(np.asarray(s, np.float64)))]
+        return self.unit[self._segment_index(np.atleast_1d(np.asarray(s, np.float64)))]
 
     def heading_at(self, s: ArrayLike) -> F64:
         """ENU yaw of the route direction, rad (counter-clockwise from East)."""
@@ -102,15 +104,16 @@ class Route:
         a piecewise-constant tangent jump by the vertex angle (4 deg at 25 m on a 330 m
         radius), which would show up as heading deviation that no vehicle has."""
         s_a = np.atleast_1d(np.asarray(s, np.float64))
-        h = np.unwrap(np.arctan2(self._unit[:, 1], self._unit[:, 0]))
+        h = np.unwrap(np.arctan2(self.unit[:, 1], self.unit[:, 0]))
         if len(h) == 1:
             return np.full(s_a.shape, h[0])
-        half = np.minimum(self._seglen[:-1], self._seglen[1:]) / 2
+        half = np.minimum(self.seglen[:-1], self.seglen[1:]) / 2
         v = self.s[1:-1]
         knots_s = np.column_stack([v - half, v + half]).ravel()
         knots_h = np.column_stack([h[:-1], h[1:]]).ravel()
         out = np.interp(s_a, knots_s, knots_h)
-        return np.arctan2(np.sin(out), np.cos(out))
+        wrapped: F64 = np.arctan2(np.sin(out), np.cos(out))
+        return wrapped
 
     def normal_at(self, s: ArrayLike) -> F64:
         """(N, 2) unit normals pointing to the LEFT of the direction of travel."""
@@ -141,8 +144,8 @@ class Route:
         p = np.atleast_2d(np.asarray(points, np.float64))[:, :2]
         n = len(p)
         a = self.xy[:-1]
-        u = self._unit
-        L = self._seglen
+        u = self.unit
+        L = self.seglen
         if s_guess is not None and search_m is not None:
             g = np.broadcast_to(np.asarray(s_guess, np.float64), (n,))
             s_lo, s_hi = g - search_m, g + search_m

@@ -9,314 +9,55 @@ runs, and a tab never sees a half-built session.
 
 from __future__ import annotations
 
-import os
-import re
-import shutil
-import tempfile
 import threading
 import time
 import traceback
 from collections.abc import Callable, Iterable
-from dataclasses import dataclass, field, replace
+from dataclasses import dataclass, field, fields
 from pathlib import Path
-from typing import Any, Literal, Protocol
+from typing import TYPE_CHECKING, Any, Literal, Protocol
 
 import numpy as np
-from numpy.typing import NDArray
 
-from estimator.errors import ConfigError, RoutefuseError
+from estimator.errors import RoutefuseError
 from estimator.params import Params, with_values
 from estimator.results import Run
-from inspector.cli.options import parse_outage
+from inspector.folders import DataFolders, Kind, Listing, UploadFolder
 from inspector.scene_data import SceneData
+from inspector.timeline import (
+    Outages,
+    Playhead,
+    Timeline,
+    format_outages,
+    normalise_outages,
+    parse_outages,
+)
 
-F64 = NDArray[np.float64]
+if TYPE_CHECKING:
+    from estimator.params import Method
+    from estimator.pipeline import Inputs, MethodRuns
+    from estimator.pipeline import MethodRunner as RunFn
+    from inspector.offroute import OffRoute
+    from inspector.plots import DeviationPlot
 
 ProposedMethod = Literal["proposed", "paper"]
-Kind = Literal["log", "route"]
-Outages = tuple[tuple[float, float], ...]
-"""injected GNSS outages: (start, end) seconds after the log start, as ``--outage START:END``"""
 
-LOG_SUFFIXES = (".mcap", ".bag", ".db3")
-ROUTE_SUFFIXES = (".geojson", ".gpx", ".kml", ".csv")
-DEFAULT_UPLOAD_LIMIT = 100 * 1024 * 1024
-
-
-# ---------------------------------------------------------------------------------------------
-# Files the user may open
-
-
-def _is_route(path: Path) -> bool:
-    return path.name.lower().endswith(ROUTE_SUFFIXES) or path.name.lower().endswith(".route.json")
-
-
-def _is_log_file(path: Path) -> bool:
-    return path.suffix.lower() in LOG_SUFFIXES
-
-
-@dataclass(frozen=True)
-class Listing:
-    """Display name -> path of every log and route under the data folders."""
-
-    logs: dict[str, Path]
-    routes: dict[str, Path]
-
-
-@dataclass(frozen=True)
-class DataFolders:
-    """The folders the server may read from. Only what :meth:`listing` found can be opened, so a
-    name can never reach outside them (no ``..``, no symlink leading out)."""
-
-    roots: tuple[Path, ...]
-    max_depth: int = 4
-    max_entries: int = 5000
-
-    @classmethod
-    def of(cls, *roots: str | Path) -> DataFolders:
-        seen: list[Path] = []
-        for r in roots:
-            p = Path(r).expanduser().resolve()
-            if p.is_dir() and p not in seen:
-                seen.append(p)
-        return cls(tuple(seen))
-
-    def with_root(self, root: Path) -> DataFolders:
-        root = root.resolve()
-        return self if root in self.roots else replace(self, roots=(*self.roots, root))
-
-    def _labels(self) -> list[str]:
-        labels: list[str] = []
-        for root in self.roots:
-            label = root.name or "data"
-            n = 2
-            base = label
-            while label in labels:
-                label = f"{base}#{n}"
-                n += 1
-            labels.append(label)
-        return labels
-
-    def listing(self) -> Listing:
-        logs: dict[str, Path] = {}
-        routes: dict[str, Path] = {}
-        count = 0
-        for label, root in zip(self._labels(), self.roots, strict=True):
-            for path in self._walk(root):
-                count += 1
-                if count > self.max_entries:
-                    break
-                name = f"{label}/{path.relative_to(root).as_posix()}"
-                if path.is_dir() or _is_log_file(path):
-                    logs[name] = path
-                elif _is_route(path):
-                    routes[name] = path
-        return Listing(dict(sorted(logs.items())), dict(sorted(routes.items())))
-
-    def _walk(self, root: Path) -> Iterable[Path]:
-        """Candidate files and ROS 2 bag folders under ``root`` whose real path stays inside it."""
-        root_depth = len(root.parts)
-        for dirpath, dirnames, filenames in os.walk(root, followlinks=False):
-            here = Path(dirpath)
-            dirnames.sort()
-            if len(here.parts) - root_depth >= self.max_depth:
-                dirnames.clear()
-            if "metadata.yaml" in filenames and here != root:
-                dirnames.clear()
-                if _inside(here, root):
-                    yield here
-                continue
-            dirnames[:] = [d for d in dirnames if not d.startswith(".")]
-            for name in sorted(filenames):
-                p = here / name
-                if (_is_log_file(p) or _is_route(p)) and _inside(p, root):
-                    yield p
-
-    def resolve(self, name: str, kind: Kind) -> Path:
-        """The path behind a display name from :meth:`listing`."""
-        listing = self.listing()
-        table = listing.logs if kind == "log" else listing.routes
-        path = table.get(name)
-        if path is None:
-            raise RoutefuseError(name, f"no such {kind} under the data folders")
-        return path
-
-    def default_route(self, log_name: str) -> str | None:
-        """The route that belongs to a log: ``<stem>.route.*`` or ``<stem>.<route suffix>``
-        beside it."""
-        listing = self.listing()
-        log = listing.logs.get(log_name)
-        if log is None:
-            return None
-        stem = log.name.split(".")[0]
-        for name, path in listing.routes.items():
-            if path.parent == log.parent and path.name.split(".")[0] == stem:
-                return name
-        return None
-
-
-def _inside(path: Path, root: Path) -> bool:
-    try:
-        real = path.resolve(strict=True)
-    except OSError:
-        return False
-    return real == root or root in real.parents
-
-
-class UploadFolder:
-    """A private temporary folder for uploaded files (mode 0700, removed on :meth:`close`),
-    with a size limit per file."""
-
-    def __init__(self, *, max_bytes: int = DEFAULT_UPLOAD_LIMIT) -> None:
-        self.max_bytes = max_bytes
-        self.path = Path(tempfile.mkdtemp(prefix="routefuse-uploads-")).resolve()
-        self._lock = threading.Lock()
-        self._count = 0
-
-    def check_size(self, filename: str, size: int) -> None:
-        if size > self.max_bytes:
-            raise RoutefuseError(
-                filename,
-                f"upload of {size / 1e6:.1f} MB exceeds the limit of "
-                f"{self.max_bytes / 1e6:.0f} MB (put large logs in a --data-dir instead)",
-            )
-
-    def save(self, filename: str, content: bytes) -> Path:
-        """Write an upload under a sanitised name; the client's name never picks a folder."""
-        self.check_size(filename, len(content))
-        if not content:
-            raise RoutefuseError(filename, "the uploaded file is empty")
-        base = re.sub(r"[^A-Za-z0-9._-]+", "_", Path(filename.replace("\\", "/")).name)
-        base = base.lstrip(".") or "upload"
-        if not (_is_log_file(Path(base)) or _is_route(Path(base))):
-            raise RoutefuseError(
-                filename, "not a log (.mcap, .bag, .db3) or route (.geojson, .gpx, .kml, .csv)"
-            )
-        with self._lock:
-            self._count += 1
-            target = self.path / f"{self._count:03d}-{base}"
-        fd = os.open(target, os.O_WRONLY | os.O_CREAT | os.O_EXCL, 0o600)
-        with os.fdopen(fd, "wb") as fh:
-            fh.write(content)
-        return target
-
-    def close(self) -> None:
-        shutil.rmtree(self.path, ignore_errors=True)
-
-
-# ---------------------------------------------------------------------------------------------
-# Time
-
-
-@dataclass(frozen=True)
-class Timeline:
-    """Frames and match attempts of a session on the relative clock (seconds after the log
-    start), with the navigation a person uses: step, next/previous attempt, next rejection."""
-
-    t: F64
-    """(N,) frame times, s after start"""
-    match_t: F64
-    """(A,) attempt times, s after start"""
-    match_accepted: NDArray[np.bool_]
-
-    @classmethod
-    def of_run(cls, run: Run) -> Timeline:
-        return cls(
-            t=np.asarray(run.epochs.t, np.float64) - run.t0,
-            match_t=np.array([m.t - run.t0 for m in run.matches], np.float64),
-            match_accepted=np.array([m.accepted for m in run.matches], bool),
-        )
-
-    @property
-    def n_frames(self) -> int:
-        return len(self.t)
-
-    @property
-    def duration(self) -> float:
-        return float(self.t[-1]) if len(self.t) else 0.0
-
-    def clamp(self, t: float) -> float:
-        return float(np.clip(t, self.t[0], self.t[-1])) if len(self.t) else 0.0
-
-    def frame_at(self, t: float) -> int:
-        """The last frame at or before ``t`` (clamped)."""
-        i = np.searchsorted(self.t, t + 1e-9, side="right") - 1
-        return int(np.clip(i, 0, len(self.t) - 1))
-
-    def step(self, t: float, frames: int) -> float:
-        """The time ``frames`` frames away from the frame shown at ``t``."""
-        return float(self.t[int(np.clip(self.frame_at(t) + frames, 0, len(self.t) - 1))])
-
-    def match_at(self, t: float) -> int | None:
-        """The last attempt at or before ``t``."""
-        i = int(np.searchsorted(self.match_t, t + 1e-9, side="right")) - 1
-        return i if i >= 0 else None
-
-    def next_match(self, t: float, *, rejected_only: bool = False) -> int | None:
-        """The first attempt strictly after ``t``."""
-        idx = np.flatnonzero(self.match_t > t + 1e-9)
-        if rejected_only:
-            idx = idx[~self.match_accepted[idx]]
-        return int(idx[0]) if len(idx) else None
-
-    def previous_match(self, t: float, *, rejected_only: bool = False) -> int | None:
-        """The last attempt strictly before ``t``."""
-        idx = np.flatnonzero(self.match_t < t - 1e-9)
-        if rejected_only:
-            idx = idx[~self.match_accepted[idx]]
-        return int(idx[-1]) if len(idx) else None
-
-
-@dataclass
-class Playhead:
-    """One tab's position in time and playback state (kept per browser tab)."""
-
-    t: float = 0.0
-    playing: bool = False
-    speed: float = 1.0
-
-    def advance(self, timeline: Timeline, wall_dt: float) -> None:
-        """Move by ``wall_dt`` seconds of wall time at the chosen speed; stop at the end."""
-        if not self.playing:
-            return
-        t = self.t + wall_dt * self.speed
-        if t >= timeline.duration:
-            t, self.playing = timeline.duration, False
-        self.t = timeline.clamp(t)
-
-
-# ---------------------------------------------------------------------------------------------
-# Injected GNSS outages
-
-
-def parse_outages(text: str) -> Outages:
-    """Outages typed as ``30:60, 90:120`` (each part read by the ``--outage`` parser, so the
-    command line and the UI accept the same values); empty text means none."""
-    parts = [p.strip() for p in text.split(",")]
-    try:
-        return normalise_outages(parse_outage(p) for p in parts if p)
-    except ConfigError as exc:
-        raise ConfigError("GNSS outages", exc.problem) from None
-
-
-def normalise_outages(outages: Iterable[tuple[float, float]]) -> Outages:
-    """Sorted float pairs, checked: the same outages typed in another order are the same
-    request, so they do not re-run."""
-    out = []
-    for a, b in outages:
-        a, b = float(a), float(b)
-        if not (np.isfinite(a) and np.isfinite(b)) or not b > a:
-            raise ConfigError("GNSS outages", f"{a:g}:{b:g}: END must be after START")
-        out.append((a, b))
-    return tuple(sorted(set(out)))
-
-
-def format_outages(outages: Outages) -> str:
-    """The text :func:`parse_outages` reads back (``30:60, 90:120``)."""
-    return ", ".join(f"{a:g}:{b:g}" for a, b in outages)
-
-
-# ---------------------------------------------------------------------------------------------
-# The session and the worker
+__all__ = [
+    "Controller",
+    "DataFolders",
+    "Kind",
+    "Listing",
+    "Outages",
+    "Playhead",
+    "ProposedMethod",
+    "Session",
+    "Superseded",
+    "Timeline",
+    "UploadFolder",
+    "format_outages",
+    "normalise_outages",
+    "parse_outages",
+]
 
 
 @dataclass(frozen=True)
@@ -328,8 +69,8 @@ class Session:
     route_path: Path
     log_name: str
     route_name: str
-    inputs: Any
-    """:class:`estimator.pipeline.inputs.Inputs` (log, route, frame)"""
+    inputs: Inputs
+    """log, route and frame (tests hand in a stand-in with the same fields)"""
     params: Params
     method: ProposedMethod
     outages: Outages
@@ -340,11 +81,11 @@ class Session:
     scene: SceneData
     metrics: tuple[tuple[str, str, str], ...]
     """rows (quantity, baseline, proposed) of the ``routefuse run`` table"""
-    deviation: Any
-    """:class:`inspector.plots.DeviationPlot` of both runs"""
+    deviation: DeviationPlot
+    """the deviation plots of both runs"""
     timings: dict[str, float] = field(default_factory=dict)
-    off_route: Any = None
-    """:class:`inspector.offroute.OffRoute` of the proposed run (None for hand-built sessions)"""
+    off_route: OffRoute | None = None
+    """the proposed run against the route (None for hand-built sessions)"""
 
 
 @dataclass(frozen=True)
@@ -357,6 +98,23 @@ class _Request:
     params: Params
     method: ProposedMethod
     outages: Outages
+
+    @classmethod
+    def of(
+        cls,
+        version: int,
+        base: _Request | Session | None,
+        initial: dict[str, Any],
+        changes: dict[str, Any],
+    ) -> _Request:
+        """``base`` (or, before the first load, the ``initial`` choices) with ``changes``."""
+        fields_ = (
+            dict(initial)
+            if base is None
+            else {k: getattr(base, k) for k in _REQUEST_FIELDS if k != "version"}
+        )
+        fields_.update(changes)
+        return cls(version=version, **fields_)
 
     def same_target(self, other: _Request | Session | None) -> bool:
         """Would ``other`` show the same runs? (everything a run depends on)"""
@@ -371,6 +129,9 @@ class _Request:
         )
 
 
+_REQUEST_FIELDS = tuple(f.name for f in fields(_Request))
+
+
 class Superseded(Exception):
     """Raised inside a run's progress callback when a newer request has arrived."""
 
@@ -380,48 +141,67 @@ SessionListener = Callable[[Session], None]
 ErrorListener = Callable[[RoutefuseError], None]
 
 
-def _default_open(log_path: Path, route_path: Path, progress: ProgressListener) -> Any:
+class _Listeners:
+    """Who is told of progress (kind 0), new sessions (1) and failures (2), on the worker
+    thread; a listener that raises does not keep the others from hearing."""
+
+    def __init__(self) -> None:
+        self._lock = threading.Lock()
+        self._entries: list[
+            tuple[ProgressListener | None, SessionListener | None, ErrorListener | None]
+        ] = []
+
+    def add(
+        self,
+        entry: tuple[ProgressListener | None, SessionListener | None, ErrorListener | None],
+    ) -> Callable[[], None]:
+        with self._lock:
+            self._entries.append(entry)
+
+        def remove() -> None:
+            with self._lock:
+                if entry in self._entries:
+                    self._entries.remove(entry)
+
+        return remove
+
+    def emit(self, kind: int, *args: Any) -> None:
+        with self._lock:
+            listeners = [entry[kind] for entry in self._entries]
+        for fn in listeners:
+            if fn is None:
+                continue
+            try:
+                fn(*args)
+            except Exception:
+                traceback.print_exc()
+
+
+class StageProgress(Protocol):
+    """One stage's share of the progress bar: how far it is, and optionally what it does."""
+
+    def __call__(self, fraction: float = 0.0, message: str = "", /, *_: Any) -> None: ...
+
+
+def _default_open(log_path: Path, route_path: Path, progress: Callable[[float], None]) -> Inputs:
     from estimator.pipeline.inputs import open_inputs
 
     return open_inputs(log_path, route_path, progress=progress)
 
 
-class RunFn(Protocol):
-    """How the worker runs one method (:func:`estimator.pipeline.runner.run` unless a test fakes it)."""
-
-    def __call__(
-        self,
-        inputs: Any,
-        params: Params,
-        method: str,
-        progress: ProgressListener,
-        reuse: Run | None,
-        *,
-        outages: Outages,
-    ) -> Run: ...
-
-
 def _default_run(
-    inputs: Any,
+    inputs: Inputs,
     params: Params,
-    method: str,
-    progress: ProgressListener,
+    method: Method,
+    progress: Callable[[float], None],
     reuse: Run | None,
     *,
     outages: Outages,
 ) -> Run:
-    from estimator.pipeline.runner import run
+    """How the worker runs one method (tests substitute a fake :data:`RunFn`)."""
+    from estimator.pipeline import run_method
 
-    return run(
-        inputs.log,
-        inputs.route,
-        params,
-        method=method,  # type: ignore[arg-type]
-        frame=inputs.frame,
-        outages=outages,
-        progress=progress,
-        reuse=reuse,
-    )
+    return run_method(inputs, params, method, progress, reuse, outages=outages)
 
 
 class Controller:
@@ -440,7 +220,7 @@ class Controller:
         uploads: UploadFolder | None = None,
         params: Params | None = None,
         method: ProposedMethod = "proposed",
-        opener: Callable[[Path, Path, ProgressListener], Any] = _default_open,
+        opener: Callable[[Path, Path, Callable[[float], None]], Inputs] = _default_open,
         runner: RunFn = _default_run,
     ) -> None:
         self.uploads = uploads
@@ -456,11 +236,9 @@ class Controller:
         self._busy = False
         self._version = 0
         self._session: Session | None = None
-        self._inputs_cache: tuple[tuple[Path, Path], Any] | None = None
+        self._inputs_cache: tuple[tuple[Path, Path], Inputs] | None = None
         self._closed = False
-        self._listeners: list[
-            tuple[ProgressListener | None, SessionListener | None, ErrorListener | None]
-        ] = []
+        self._listeners = _Listeners()
         self._thread = threading.Thread(target=self._work, name="routefuse-runner", daemon=True)
         self._thread.start()
 
@@ -474,35 +252,36 @@ class Controller:
     def session(self) -> Session | None:
         return self._session
 
+    def _latest(self) -> _Request | Session | None:
+        with self._cond:
+            return self._wanted or self._session
+
     @property
     def params(self) -> Params:
         """The parameters of the latest request (what the panel should show)."""
-        with self._cond:
-            if self._wanted is not None:
-                return self._wanted.params
-        return self._session.params if self._session else self._initial_params
+        latest = self._latest()
+        return latest.params if latest else self._initial_params
 
     @property
     def method(self) -> ProposedMethod:
-        with self._cond:
-            if self._wanted is not None:
-                return self._wanted.method
-        return self._session.method if self._session else self._initial_method
+        latest = self._latest()
+        return latest.method if latest else self._initial_method
 
     @property
     def outages(self) -> Outages:
         """The injected GNSS outages of the latest request (what the outage field shows)."""
-        with self._cond:
-            if self._wanted is not None:
-                return self._wanted.outages
-        return self._session.outages if self._session else self._initial_outages
+        latest = self._latest()
+        return latest.outages if latest else self._initial_outages
 
     @property
     def busy(self) -> bool:
         with self._cond:
-            return self._busy or (
-                self._wanted is not None and self._wanted.version > self._done_version
-            )
+            return self._pending()
+
+    def _pending(self) -> bool:
+        return self._busy or (
+            self._wanted is not None and self._wanted.version > self._done_version
+        )
 
     def subscribe(
         self,
@@ -512,24 +291,13 @@ class Controller:
         on_error: ErrorListener | None = None,
     ) -> Callable[[], None]:
         """Register listeners (called on the worker thread); returns the unsubscribe call."""
-        entry = (on_progress, on_session, on_error)
-        with self._cond:
-            self._listeners.append(entry)
-
-        def unsubscribe() -> None:
-            with self._cond:
-                if entry in self._listeners:
-                    self._listeners.remove(entry)
-
-        return unsubscribe
+        return self._listeners.add((on_progress, on_session, on_error))
 
     def wait_idle(self, timeout: float = 60.0) -> bool:
         """Block until every request so far has been served (tests, the CLI)."""
         deadline = time.monotonic() + timeout
         with self._cond:
-            while self._busy or (
-                self._wanted is not None and self._wanted.version > self._done_version
-            ):
+            while self._pending():
                 left = deadline - time.monotonic()
                 if left <= 0:
                     return False
@@ -608,37 +376,22 @@ class Controller:
     def _request(self, **changes: Any) -> None:
         with self._cond:
             base = self._wanted or self._session
-            if base is None:
-                if "log_path" not in changes:
-                    # Nothing loaded yet: remember the choice for the first load.
-                    if "params" in changes:
-                        self._initial_params = changes["params"]
-                    if "method" in changes:
-                        self._initial_method = changes["method"]
-                    if "outages" in changes:
-                        self._initial_outages = changes["outages"]
-                    return
-                fields_ = {
-                    "params": self._initial_params,
-                    "method": self._initial_method,
-                    "outages": self._initial_outages,
-                }
-            else:
-                fields_ = {
-                    k: getattr(base, k)
-                    for k in (
-                        "log_path",
-                        "route_path",
-                        "log_name",
-                        "route_name",
-                        "params",
-                        "method",
-                        "outages",
-                    )
-                }
-            fields_.update(changes)
+            if base is None and "log_path" not in changes:
+                # Nothing loaded yet: remember the choice for the first load.
+                if "params" in changes:
+                    self._initial_params = changes["params"]
+                if "method" in changes:
+                    self._initial_method = changes["method"]
+                if "outages" in changes:
+                    self._initial_outages = changes["outages"]
+                return
+            initial = {
+                "params": self._initial_params,
+                "method": self._initial_method,
+                "outages": self._initial_outages,
+            }
             self._version += 1
-            req = _Request(version=self._version, **fields_)
+            req = _Request.of(self._version, base, initial, changes)
             if req.same_target(self._wanted) or (
                 self._wanted is None and not self._busy and req.same_target(self._session)
             ):
@@ -658,15 +411,7 @@ class Controller:
     # -- the worker -----------------------------------------------------------------------
 
     def _emit(self, kind: int, *args: Any) -> None:
-        with self._cond:
-            listeners = [entry[kind] for entry in self._listeners]
-        for fn in listeners:
-            if fn is None:
-                continue
-            try:
-                fn(*args)
-            except Exception:
-                traceback.print_exc()
+        self._listeners.emit(kind, *args)
 
     def _superseded(self, req: _Request) -> bool:
         with self._cond:
@@ -725,7 +470,7 @@ class Controller:
         timings: dict[str, float] = {}
         prev = self._session
 
-        def stage(lo: float, hi: float, what: str) -> ProgressListener:
+        def stage(lo: float, hi: float, what: str) -> StageProgress:
             def report(fraction: float = 0.0, message: str = "", *_: Any) -> None:
                 if self._superseded(req):
                     raise Superseded
@@ -748,69 +493,78 @@ class Controller:
         timings["open_s"] = time.perf_counter() - t_start
         if self._superseded(req):
             raise Superseded
-        for a, b in req.outages:
-            if a >= inputs.log.duration_s:
-                raise ConfigError(
-                    "GNSS outages",
-                    f"{a:g}:{b:g} starts after the log ends ({inputs.log.duration_s:.1f} s)",
-                )
+        from estimator.pipeline import run_methods
 
-        # a previous run is reused only on the same log and outages (the runner re-checks)
-        same_inputs = (
-            prev is not None
-            and (prev.log_path, prev.route_path) == key
-            and prev.outages == req.outages
+        # the previous session's runs count only on the same inputs and outages (run_methods)
+        previous = None if prev is None else _runs_of(prev)
+        stages = {
+            "baseline": stage(0.5, 0.7, "baseline run"),
+            req.method: stage(0.7, 0.95, f"{req.method} run"),
+        }
+        session = run_methods(
+            inputs,
+            req.params,
+            methods=("baseline", req.method),
+            outages=req.outages,
+            progress=lambda m, f: stages[m](f, ""),
+            reuse=previous,
+            outage_option="GNSS outages",
+            run_one=self._runner,
         )
-        t1 = time.perf_counter()
-        base_reuse = prev.baseline if same_inputs and prev else None
-        if base_reuse is not None and base_reuse.params == req.params:
-            baseline = base_reuse
-        else:
-            report = stage(0.5, 0.7, "baseline run")
-            report(0.0)
-            baseline = self._runner(
-                inputs, req.params, "baseline", report, base_reuse, outages=req.outages
-            )
-        timings["baseline_s"] = time.perf_counter() - t1
-        t2 = time.perf_counter()
-        prop_reuse = prev.proposed if same_inputs and prev and prev.method == req.method else None
-        report = stage(0.7, 0.95, f"{req.method} run")
-        report(0.0)
-        proposed = self._runner(
-            inputs, req.params, req.method, report, prop_reuse, outages=req.outages
-        )
-        timings["proposed_s"] = time.perf_counter() - t2
+        baseline, proposed = session["baseline"], session[req.method]
+        timings["baseline_s"] = session.seconds["baseline"]
+        timings["proposed_s"] = session.seconds[req.method]
         if self._superseded(req):
             raise Superseded
-        t3 = time.perf_counter()
-        from inspector.plots import DeviationPlot, metrics_rows
-
-        scene = SceneData.build(
-            baseline=baseline, proposed=proposed, route=inputs.route, log=inputs.log
-        )
-        deviation = DeviationPlot.build(inputs, baseline, proposed)
-        from inspector.offroute import OffRoute
-
-        off_route = OffRoute.build(scene, inputs.route, req.params)
-        metrics = metrics_rows(inputs, baseline, proposed)
-        timings["views_s"] = time.perf_counter() - t3
+        served = _session_of(req, inputs, baseline, proposed, timings)
         self._emit(0, 1.0, "done")
-        return Session(
-            version=req.version,
-            log_path=req.log_path,
-            route_path=req.route_path,
-            log_name=req.log_name,
-            route_name=req.route_name,
-            inputs=inputs,
-            params=req.params,
-            method=req.method,
-            outages=req.outages,
-            baseline=baseline,
-            proposed=proposed,
-            timeline=Timeline.of_run(proposed),
-            scene=scene,
-            metrics=metrics,
-            deviation=deviation,
-            timings=timings,
-            off_route=off_route,
-        )
+        return served
+
+
+def _runs_of(session: Session) -> MethodRuns:
+    """A session's runs, as :func:`estimator.pipeline.run_methods` may resume from them."""
+    from estimator.pipeline import MethodRuns
+
+    return MethodRuns(
+        inputs=session.inputs,
+        outages=session.outages,
+        runs={"baseline": session.baseline, session.method: session.proposed},
+        seconds={},
+    )
+
+
+def _session_of(
+    req: _Request, inputs: Inputs, baseline: Run, proposed: Run, timings: dict[str, float]
+) -> Session:
+    """The session of a served request: its runs and the views drawn from them."""
+    from inspector.offroute import OffRoute
+    from inspector.plots import DeviationPlot, metrics_rows
+
+    route = inputs.route
+    if route is None:  # the inspector always opens a route file with the log
+        raise RoutefuseError(req.route_name, "no route was read")
+    t3 = time.perf_counter()
+    scene = SceneData.build(baseline=baseline, proposed=proposed, route=route, log=inputs.log)
+    deviation = DeviationPlot.build(inputs, baseline, proposed)
+    off_route = OffRoute.build(scene, route, req.params)
+    metrics = metrics_rows(inputs, baseline, proposed)
+    timings["views_s"] = time.perf_counter() - t3
+    return Session(
+        version=req.version,
+        log_path=req.log_path,
+        route_path=req.route_path,
+        log_name=req.log_name,
+        route_name=req.route_name,
+        inputs=inputs,
+        params=req.params,
+        method=req.method,
+        outages=req.outages,
+        baseline=baseline,
+        proposed=proposed,
+        timeline=Timeline.of_run(proposed),
+        scene=scene,
+        metrics=metrics,
+        deviation=deviation,
+        timings=timings,
+        off_route=off_route,
+    )

@@ -12,7 +12,7 @@ polylines as line segments with screen-space thickness.
 
 from __future__ import annotations
 
-from typing import ClassVar
+from typing import ClassVar, Literal, TypeVar
 
 import numpy as np
 import viser
@@ -21,6 +21,8 @@ from estimator.results import MatchRecord
 from inspector.scene_data import F64, SceneData, Track, polyline_segments
 
 RGB = tuple[int, int, int]
+PointShape = Literal["square", "diamond", "circle", "rounded", "sparkle"]
+H = TypeVar("H", bound=viser.SceneNodeHandle)
 
 ROUTE = (120, 120, 120)
 SEGMENT = (255, 200, 0)
@@ -67,6 +69,13 @@ class Layer:
         self.scene = scene
         self.root = f"{root}/{self.key}"
         self._handles: dict[str, viser.SceneNodeHandle] = {}
+        """every part by name, shown, hidden and removed together"""
+        self._segments: dict[str, viser.LineSegmentsHandle] = {}
+        self._clouds: dict[str, viser.PointCloudHandle] = {}
+        self._meshes: dict[str, viser.MeshHandle] = {}
+        self._labels: dict[str, viser.LabelHandle] = {}
+        self._wanted: dict[str, bool] = {}
+        """whether a part has something to show (drawn only while the layer is visible)"""
         self._visible = True
 
     @property
@@ -76,28 +85,37 @@ class Layer:
     @visible.setter
     def visible(self, on: bool) -> None:
         self._visible = bool(on)
-        for h in self._handles.values():
-            h.visible = self._visible and getattr(h, "_routefuse_wanted", True)
+        for name, h in self._handles.items():
+            h.visible = self._visible and self._wanted.get(name, True)
 
     def _show(self, name: str, on: bool) -> None:
-        h = self._handles[name]
-        h._routefuse_wanted = on  # type: ignore[attr-defined]
-        h.visible = on and self._visible
+        self._wanted[name] = on
+        self._handles[name].visible = on and self._visible
+
+    def _keep(self, name: str, handle: H, kind: dict[str, H]) -> H:
+        """Register a new part under ``name``, in ``kind`` (its typed table) and among all."""
+        kind[name] = handle
+        self._handles[name] = handle
+        return handle
 
     def _lines(self, name: str, seg: np.ndarray, color: RGB, px: float) -> None:
         seg = _segments_or_empty(np.asarray(seg, np.float32))
-        h = self._handles.get(name)
+        h = self._segments.get(name)
         if h is None:
-            self._handles[name] = self.scene.add_line_segments(
-                f"{self.root}/{name}",
-                seg,
-                color,
-                thickness=px,
-                thickness_units="screen",
-                visible=self._visible,
+            self._keep(
+                name,
+                self.scene.add_line_segments(
+                    f"{self.root}/{name}",
+                    seg,
+                    color,
+                    thickness=px,
+                    thickness_units="screen",
+                    visible=self._visible,
+                ),
+                self._segments,
             )
         else:
-            h.points = seg  # type: ignore[attr-defined]
+            h.points = seg
 
     def _cloud(
         self,
@@ -105,29 +123,33 @@ class Layer:
         pts: np.ndarray,
         colors: RGB | np.ndarray,
         size: float,
-        shape: str = "circle",
+        shape: PointShape = "circle",
     ) -> None:
-        h = self._handles.get(name)
+        h = self._clouds.get(name)
         colors_arr = np.asarray(colors, np.uint8)
         if colors_arr.ndim == 2 and len(colors_arr) != len(pts):
             colors_arr = np.broadcast_to(colors_arr[:1], (len(pts), 3)).copy()
-        if h is None or (colors_arr.ndim == 2 and h.colors.shape != colors_arr.shape):  # type: ignore[attr-defined]
+        if h is None or (colors_arr.ndim == 2 and h.colors.shape != colors_arr.shape):
             if h is not None:
                 h.remove()
-            self._handles[name] = self.scene.add_point_cloud(
-                f"{self.root}/{name}",
-                pts,
-                colors_arr,
-                point_size=size,
-                point_shape=shape,  # type: ignore[arg-type]
-                precision="float32",
-                point_shading="flat",
-                visible=self._visible,
+            self._keep(
+                name,
+                self.scene.add_point_cloud(
+                    f"{self.root}/{name}",
+                    pts,
+                    colors_arr,
+                    point_size=size,
+                    point_shape=shape,
+                    precision="float32",
+                    point_shading="flat",
+                    visible=self._visible,
+                ),
+                self._clouds,
             )
         else:
-            h.points = pts  # type: ignore[attr-defined]
+            h.points = pts
             if colors_arr.ndim == 2:
-                h.colors = colors_arr  # type: ignore[attr-defined]
+                h.colors = colors_arr
 
     def _dots(self, name: str, xy: F64, colors: np.ndarray, px: float, z: float) -> None:
         """Markers that keep their size on screen at any zoom: tiny segments drawn with a
@@ -145,20 +167,24 @@ class Layer:
             if len(cols) == len(seg)
             else np.zeros((len(seg), 2, 3), np.uint8)
         )
-        h = self._handles.get(name)
-        if h is not None and h.points.shape == seg.shape:  # type: ignore[attr-defined]
-            h.points = seg  # type: ignore[attr-defined]
-            h.colors = cols  # type: ignore[attr-defined]
+        h = self._segments.get(name)
+        if h is not None and h.points.shape == seg.shape:
+            h.points = seg
+            h.colors = cols
             return
         if h is not None:
             h.remove()
-        self._handles[name] = self.scene.add_line_segments(
-            f"{self.root}/{name}",
-            seg,
-            cols,
-            thickness=px,
-            thickness_units="screen",
-            visible=self._visible,
+        self._keep(
+            name,
+            self.scene.add_line_segments(
+                f"{self.root}/{name}",
+                seg,
+                cols,
+                thickness=px,
+                thickness_units="screen",
+                visible=self._visible,
+            ),
+            self._segments,
         )
 
     def set_data(self, data: SceneData) -> None:
@@ -170,7 +196,9 @@ class Layer:
     def remove(self) -> None:
         for h in self._handles.values():
             h.remove()
-        self._handles.clear()
+        for table in (self._handles, self._segments, self._clouds, self._meshes, self._labels):
+            table.clear()
+        self._wanted.clear()
 
 
 class RouteLayer(Layer):
@@ -187,7 +215,7 @@ class GnssLayer(Layer):
 
     def set_data(self, data: SceneData) -> None:
         self._lines("missing", data.degraded_segments, NO_GNSS, 14.0)
-        self._handles["missing"].position = (0.0, 0.0, -0.05)  # beneath everything
+        self._segments["missing"].position = (0.0, 0.0, -0.05)  # beneath everything
         self._cloud("fixes", _points3(data.gnss_fixes, 0.05), GNSS, 1.2)
         self._show("fixes", len(data.gnss_fixes) > 0)
         self._show("missing", len(data.degraded_segments) > 0)
@@ -207,31 +235,39 @@ class TrackLayer(Layer):
         track = self._track(data)
         line = track.line if track is not None else np.zeros((0, 2))
         self._lines("line", polyline_segments(line, self.z), self.color, 2.0)
-        if "pose" not in self._handles:
+        if "pose" not in self._meshes:
             L = self.length_m
             verts = np.array(
                 [[L * 0.6, 0, 0], [-L * 0.4, L * 0.3, 0], [-L * 0.4, -L * 0.3, 0]], np.float32
             )
-            self._handles["pose"] = self.scene.add_mesh_simple(
-                f"{self.root}/pose",
-                verts,
-                np.array([[0, 1, 2]], np.uint32),
-                color=self.color,
-                side="double",
-                flat_shading=True,
-                cast_shadow=False,
-                receive_shadow=False,
-                visible=self._visible,
+            self._keep(
+                "pose",
+                self.scene.add_mesh_simple(
+                    f"{self.root}/pose",
+                    verts,
+                    np.array([[0, 1, 2]], np.uint32),
+                    color=self.color,
+                    side="double",
+                    flat_shading=True,
+                    cast_shadow=False,
+                    receive_shadow=False,
+                    visible=self._visible,
+                ),
+                self._meshes,
             )
-        if "marker" not in self._handles:
+        if "marker" not in self._segments:
             # the pose seen from far away: a dot of constant size on screen
-            self._handles["marker"] = self.scene.add_line_segments(
-                f"{self.root}/marker",
-                np.array([[[-0.01, 0, 0], [0.01, 0, 0]]], np.float32),
-                self.color,
-                thickness=9.0,
-                thickness_units="screen",
-                visible=self._visible,
+            self._keep(
+                "marker",
+                self.scene.add_line_segments(
+                    f"{self.root}/marker",
+                    np.array([[[-0.01, 0, 0], [0.01, 0, 0]]], np.float32),
+                    self.color,
+                    thickness=9.0,
+                    thickness_units="screen",
+                    visible=self._visible,
+                ),
+                self._segments,
             )
         self._show("line", track is not None)
         self._show("pose", track is not None)
@@ -240,19 +276,19 @@ class TrackLayer(Layer):
     def set_pose_scale(self, scale: float) -> None:
         """Enlarge the vehicle marker: seen from high above a whole drive, a car-sized marker
         is a dot (the export's overview replay)."""
-        h = self._handles.get("pose")
+        h = self._meshes.get("pose")
         if h is not None:
-            h.scale = float(scale)  # type: ignore[attr-defined]
+            h.scale = float(scale)
 
     def draw(self, data: SceneData, t: float) -> None:
         track = self._track(data)
         if track is None:
             return
         xy, yaw = track.pose_at(t)
-        h = self._handles["pose"]
+        h = self._meshes["pose"]
         h.position = (float(xy[0]), float(xy[1]), self.z + 0.3)
         h.wxyz = _yaw_wxyz(yaw)
-        self._handles["marker"].position = (float(xy[0]), float(xy[1]), self.z + 0.25)
+        self._segments["marker"].position = (float(xy[0]), float(xy[1]), self.z + 0.25)
 
 
 class BaselineLayer(TrackLayer):
@@ -374,18 +410,23 @@ class MatchLayer(Layer):
         self._cloud("pseudo", _points3(z if has_z else np.zeros((0, 2)), 0.5), PSEUDO, 2.0)
         anchor = p_dr if np.all(np.isfinite(p_dr)) else (win[-1] if len(win) else np.zeros(2))
         text = f"#{m.index} {m.verdict}"
-        h = self._handles.get("label")
+        position = (float(anchor[0]), float(anchor[1]), 1.0)
+        h = self._labels.get("label")
         if h is None:
-            self._handles["label"] = self.scene.add_label(
-                f"{self.root}/label",
-                text,
-                position=(*map(float, anchor), 1.0),
-                anchor="bottom-left",
-                visible=self._visible,
+            self._keep(
+                "label",
+                self.scene.add_label(
+                    f"{self.root}/label",
+                    text,
+                    position=position,
+                    anchor="bottom-left",
+                    visible=self._visible,
+                ),
+                self._labels,
             )
         else:
-            h.text = text  # type: ignore[attr-defined]
-            h.position = (*map(float, anchor), 1.0)
+            h.text = text
+            h.position = position
         shown = {
             "segment": len(seg) > 1,
             "window": len(win) > 1,

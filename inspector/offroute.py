@@ -4,7 +4,7 @@ or off the route. Computed once per run (vectorised, on the controller's worker 
 step only looks it up.
 
 The vehicle is the ground truth when the log has it (what really happened), else the proposed
-estimate. Its distance from the route comes from :func:`estimator.matching.match.track_on_route`
+estimate. Its distance from the route comes from :func:`estimator.matching.track_on_route`
 (followed along the route, so a loop or a parallel carriageway does not capture it). It is
 off-route where that distance exceeds ``params.offset.max_offset_m``: the largest lateral offset
 the estimator still learns as "a lane of this road" (beyond it the vehicle is not on this road),
@@ -19,17 +19,12 @@ from typing import Any, Literal
 import numpy as np
 from numpy.typing import NDArray
 
-from estimator.matching.match import track_on_route
+from estimator.matching import track_on_route
 from estimator.params import Params
 from estimator.results import MatchRecord
 from estimator.route import Route
 
 F64 = NDArray[np.float64]
-
-OFF_ROUTE_GATES = ("lane_continuity", "alternative_")
-"""Candidate-validation gates (``extensions.candidate_validation``) whose failure means the
-candidate road is ambiguous (a rival shift or direction fits as well) or the vehicle moved
-across the route away from its lane: the estimator refuses the match as off-route."""
 
 MAX_PLOT_POINTS = 1500
 OFF_FILL = "rgba(150, 60, 200, 0.18)"
@@ -45,11 +40,11 @@ def off_route_threshold(params: Params) -> float:
 
 def refused_off_route(m: MatchRecord) -> str | None:
     """The gate that refused an attempt as ambiguous / off-route (its first failed gate, the
-    attempt's verdict), or None."""
+    attempt's verdict, is a candidate-validation gate that ``refuses_off_route``), or None."""
     if m.accepted:
         return None
     failed = m.failed_gates
-    if failed and failed[0].name.startswith(OFF_ROUTE_GATES):
+    if failed and failed[0].gate.refuses_off_route:
         return failed[0].name
     return None
 

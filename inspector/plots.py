@@ -170,12 +170,12 @@ _ROW_LABELS = (
 
 def metrics_rows(inputs: Any, baseline: Run, proposed: Run) -> tuple[tuple[str, str, str], ...]:
     """Rows (quantity, baseline, proposed) of the ``routefuse run`` table
-    (``estimator.evaluation.metrics.method_metrics`` over the GNSS-degraded intervals), then the match
-    summary."""
+    (:func:`estimator.evaluation.metrics.method_metrics` over the GNSS-degraded intervals), then
+    the match summary."""
     route: Route = inputs.route
     log = getattr(inputs, "log", None)
     per_run = [method_metrics(run, route, log) for run in (baseline, proposed)]
-    rows = []
+    rows: list[tuple[str, str, str]] = []
     for part, key, label, digits in _ROW_LABELS:
         values = [
             getattr(getattr(m, part), key) if getattr(m, part) is not None else None
@@ -183,7 +183,8 @@ def metrics_rows(inputs: Any, baseline: Run, proposed: Run) -> tuple[tuple[str, 
         ]
         if part == "truth" and all(v is None for v in values):
             continue
-        rows.append((label, *(_fmt(v, digits) for v in values)))
+        base_value, proposed_value = (_fmt(v, digits) for v in values)
+        rows.append((label, base_value, proposed_value))
     summary = match_summary(proposed)
     rejected = summary["rejected"]
     assert isinstance(rejected, dict)

@@ -6,7 +6,7 @@
     python scripts/compare_methods.py --write   # also replace them in docs/method.md and README.md
 
 It runs what ``routefuse run LOG --route ROUTE --method baseline proposed paper
---subtract-lane-offset`` runs (:func:`estimator.pipeline.runner.run`,
+--subtract-lane-offset`` runs (:func:`estimator.pipeline.run_methods`,
 :func:`estimator.evaluation.metrics.method_metrics` over the GNSS-degraded intervals, route deviations
 measured from the learned lane) with the default parameters, plus:
 
@@ -41,9 +41,8 @@ from estimator.evaluation.metrics import (  # noqa: E402
     method_metrics,
 )
 from estimator.log import Log  # noqa: E402
-from estimator.params import ExtensionParams, Method, Params, with_values  # noqa: E402
-from estimator.pipeline.inputs import open_inputs  # noqa: E402
-from estimator.pipeline.runner import run  # noqa: E402
+from estimator.params import ExtensionParams, Params, with_values  # noqa: E402
+from estimator.pipeline import open_inputs, run_methods  # noqa: E402
 from estimator.results import Run  # noqa: E402
 from estimator.route import Route  # noqa: E402
 
@@ -72,10 +71,6 @@ def _published(scenario: str, method: str) -> MethodMetrics:
     return MethodMetrics(RouteDeviation(*PUBLISHED[(scenario, method)]), None, 0)
 
 
-def _run(log: Log, route: Route, frame, params: Params, method: Method, reuse=None) -> Run:
-    return run(log, route, params, method=method, frame=frame, reuse=reuse)
-
-
 def _metrics(r: Run, route: Route, log: Log) -> MethodMetrics:
     return method_metrics(r, route, log, subtract_lane_offset=True, params=r.params)
 
@@ -100,13 +95,12 @@ def measure() -> dict[str, str]:
         inp = open_inputs(
             REPO / "sample_logs" / f"{name}.mcap", REPO / "sample_logs" / f"{name}.route.geojson"
         )
-        log, route, frame = inp.log, inp.route, inp.frame
+        log, route = inp.log, inp.route
         assert route is not None
         paper_name = PAPER_SCENARIO[name]
-        base = _run(log, route, frame, Params(), "baseline")
-        paper = _run(log, route, frame, Params(), "paper", base)
-        prop = _run(log, route, frame, Params(), "proposed", base)
-        head = _run(log, route, frame, heading_on, "proposed", prop)
+        session = run_methods(inp, Params(), methods=("baseline", "paper", "proposed"))
+        base, paper, prop = session["baseline"], session["paper"], session["proposed"]
+        head = run_methods(inp, heading_on, methods=("proposed",), reuse=session)["proposed"]
         runs = {"baseline": base, "paper": paper, "proposed": prop, "heading": head}
         m = {k: _metrics(r, route, log) for k, r in runs.items()}
         main_rows += [
@@ -124,10 +118,13 @@ def measure() -> dict[str, str]:
         cells = [f"{x['accepted']} / {x['attempted']}" for x in (sp, s)]
         matches.append(f"| {name} | {cells[0]} | {cells[1]} |")
         # no wheel speed
-        nw = dataclasses.replace(log, wheel=None)
-        nw_base = _run(nw, route, frame, Params(), "baseline")
-        nw_prop = _run(nw, route, frame, Params(), "proposed", nw_base)
-        nw_head = _run(nw, route, frame, heading_on, "proposed", nw_prop)
+        nw_inp = dataclasses.replace(inp, log=dataclasses.replace(log, wheel=None))
+        nw = nw_inp.log
+        nw_session = run_methods(nw_inp, Params())
+        nw_base, nw_prop = nw_session["baseline"], nw_session["proposed"]
+        nw_head = run_methods(nw_inp, heading_on, methods=("proposed",), reuse=nw_session)[
+            "proposed"
+        ]
         wheel_rows += [
             (name, "baseline, no wheel", _metrics(nw_base, route, nw)),
             (name, "routefuse, no wheel", _metrics(nw_prop, route, nw)),
@@ -139,7 +136,7 @@ def measure() -> dict[str, str]:
             if sw == "heading_observation":
                 continue
             p = with_values(Params(), {f"extensions.{sw}": False})
-            r = _run(log, route, frame, p, "proposed", prop)
+            r = run_methods(inp, p, methods=("proposed",), reuse=session)["proposed"]
             mm = _metrics(r, route, log)
             assert mm.truth is not None
             ablation[name][sw] = (mm.truth.rmse_h_err_m or 0.0, mm.route.rmse_pos_dev_m or 0.0)
@@ -150,7 +147,7 @@ def measure() -> dict[str, str]:
         )
         # entry error with and without the fixed-lag re-run (the baseline filter)
         off = with_values(Params(), {"extensions.portal_rerun": False})
-        b_off = _run(log, route, frame, off, "baseline")
+        b_off = run_methods(inp, off, methods=("baseline",))["baseline"]
         on_e, off_e = _entry_errors(base, route, log), _entry_errors(b_off, route, log)
         for (a, _), e_on, e_off in zip(base.degraded_intervals, on_e, off_e, strict=True):
             entry_lines.append(f"| {name} | {a - base.t0:.1f} | {e_off:.2f} | {e_on:.2f} |")

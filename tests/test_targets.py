@@ -16,13 +16,12 @@ import numpy as np
 import pytest
 from scipy.stats import chi2
 
-from estimator.evaluation.metrics import MethodMetrics, deviation_series, method_metrics
+from estimator.evaluation import MethodMetrics, deviation_series, method_metrics
 from estimator.log import Log
-from estimator.matching.match import shifted_route
+from estimator.matching import shifted_route
 from estimator.nav.frames import LocalFrame
 from estimator.params import Params, with_values
-from estimator.pipeline.inputs import open_inputs
-from estimator.pipeline.runner import run
+from estimator.pipeline import open_inputs, run
 from estimator.results import Run
 from estimator.route import Route
 from estimator.sim import get_scenario, simulate

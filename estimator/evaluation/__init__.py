@@ -1,0 +1,20 @@
+"""How good a run is (:mod:`.metrics`) and the results document (:mod:`.document`)."""
+
+from estimator.evaluation.document import distance_m, results_document
+from estimator.evaluation.metrics import (
+    MethodMetrics,
+    deviation_series,
+    format_table,
+    match_summary,
+    method_metrics,
+)
+
+__all__ = [
+    "MethodMetrics",
+    "deviation_series",
+    "distance_m",
+    "format_table",
+    "match_summary",
+    "method_metrics",
+    "results_document",
+]

@@ -17,7 +17,7 @@ import numpy as np
 from numpy.typing import NDArray
 
 from estimator.log import Log
-from estimator.matching.match import learn_lane_offset, track_on_route
+from estimator.matching import learn_lane_offset, track_on_route
 from estimator.params import Params
 from estimator.results import Run
 from estimator.route import Route
@@ -150,7 +150,8 @@ def _bracketed(t_src: F64, t: F64) -> NDArray[np.bool_]:
         return np.zeros(len(t), bool)
     j = np.clip(np.searchsorted(t_src, t), 1, len(t_src) - 1)
     inside = (t >= t_src[0]) & (t <= t_src[-1])
-    return inside & ((t_src[j] - t_src[j - 1]) <= _MAX_TRUTH_GAP)
+    bracketed: NDArray[np.bool_] = inside & ((t_src[j] - t_src[j - 1]) <= _MAX_TRUTH_GAP)
+    return bracketed
 
 
 def _truth_series(run: Run, log: Log) -> TruthSeries | None:
@@ -241,7 +242,7 @@ def deviation_series(
 
 
 _SERIES_CACHE_SIZE = 6
-_SERIES_CACHE: list[tuple[tuple, tuple[object, ...], DeviationSeries]] = []
+_SERIES_CACHE: list[tuple[tuple[object, ...], tuple[object, ...], DeviationSeries]] = []
 """(key, the objects whose ids are in it, kept alive so an id is not reused, series)"""
 
 

@@ -14,7 +14,6 @@ template with vectorised numpy writes. The output is byte-identical for identica
 
 from __future__ import annotations
 
-import dataclasses
 import shutil
 import tempfile
 from collections.abc import Callable, Sequence
@@ -26,15 +25,18 @@ from typing import Any, Literal
 import numpy as np
 from numpy.typing import ArrayLike, NDArray
 
+from estimator.io.messages import (
+    FIX_TYPE,
+    IMU_TYPE,
+    ODOM_TYPE,
+    PROBE_VALUES,
+    TF_TYPE,
+    TWIST_TYPE,
+    set_field,
+)
 from estimator.log import GnssData, ImuData, TruthData, WheelData
 
 Storage = Literal["mcap", "mcap-folder", "sqlite3", "ros1"]
-
-IMU_TYPE = "sensor_msgs/msg/Imu"
-FIX_TYPE = "sensor_msgs/msg/NavSatFix"
-ODOM_TYPE = "nav_msgs/msg/Odometry"
-TWIST_TYPE = "geometry_msgs/msg/TwistStamped"
-TF_TYPE = "tf2_msgs/msg/TFMessage"
 
 
 @dataclass(frozen=True)
@@ -73,29 +75,10 @@ def _typestore(storage: Storage) -> Any:
 
 def _serializer(storage: Storage) -> Callable[[Any, str], bytes]:
     ts = _typestore(storage)
-    return ts.serialize_ros1 if storage == "ros1" else ts.serialize_cdr
-
-
-def _set(msg: Any, path: str, value: Any) -> Any:
-    """A copy of ``msg`` with the dotted field ``path`` (``a.b[3]`` for array items) set."""
-    head, _, rest = path.partition(".")
-    if "[" in head:
-        name, idx = head[:-1].split("[")
-        arr = np.array(getattr(msg, name), copy=True)
-        arr[int(idx)] = value
-        return dataclasses.replace(msg, **{name: arr})
-    if rest:
-        return dataclasses.replace(msg, **{head: _set(getattr(msg, head), rest, value)})
-    return dataclasses.replace(msg, **{head: value})
-
-
-_PROBE = {  # two values per field kind whose encodings differ in every byte
-    "f8": (np.frombuffer(b"\x11" * 8, "<f8")[0], np.frombuffer(b"\x22" * 8, "<f8")[0]),
-    "i4": (0x11111111, 0x22222222),
-    "u4": (0x11111111, 0x22222222),
-    "i1": (0x11, 0x22),
-    "u1": (0x11, 0x22),
-}
+    serialize: Callable[[Any, str], bytes] = (
+        ts.serialize_ros1 if storage == "ros1" else ts.serialize_cdr
+    )
+    return serialize
 
 
 @dataclass(frozen=True)
@@ -119,7 +102,7 @@ def _template(storage: Storage, msg: Any, msgtype: str, fields: dict[str, str]) 
     base = serialize(msg, msgtype)
     offsets: dict[str, tuple[int, str]] = {}
     for path, kind in fields.items():
-        a, b = (serialize(_set(msg, path, v), msgtype) for v in _PROBE[kind])
+        a, b = (serialize(set_field(msg, path, v), msgtype) for v in PROBE_VALUES[kind])
         diff = np.flatnonzero(np.frombuffer(a, np.uint8) != np.frombuffer(b, np.uint8))
         size = np.dtype(kind).itemsize
         if len(a) != len(base) or len(diff) != size or diff[-1] - diff[0] != size - 1:
@@ -384,8 +367,9 @@ def _write_streams(
     streams: list[tuple[str, str, NDArray[np.int64], NDArray[np.uint8]]],
 ) -> None:
     times = np.concatenate([s[2] for s in streams]) if streams else np.zeros(0, np.int64)
-    which = np.concatenate([np.full(len(s[2]), k) for k, s in enumerate(streams)] or [[]])
-    index = np.concatenate([np.arange(len(s[2])) for s in streams] or [[]]).astype(np.intp)
+    none = [np.zeros(0, np.int64)]
+    which = np.concatenate([np.full(len(s[2]), k) for k, s in enumerate(streams)] or none)
+    index = np.concatenate([np.arange(len(s[2])) for s in streams] or none).astype(np.intp)
     order = np.lexsort((index, which, times))
     ts = _typestore(storage)
     if storage == "ros1":

@@ -39,7 +39,8 @@ def moving_average(x: ArrayLike, n: int) -> F64:
     i = np.arange(len(a))
     lo = np.clip(i - half, 0, len(a))
     hi = np.clip(i - half + n, 0, len(a))
-    return (c[hi] - c[lo]) / (hi - lo).reshape(-1, *([1] * (a.ndim - 1)))
+    mean: F64 = (c[hi] - c[lo]) / (hi - lo).reshape(-1, *([1] * (a.ndim - 1)))
+    return mean
 
 
 def _resample(xy: F64, step: float) -> F64:

@@ -15,24 +15,15 @@ import re
 import xml.etree.ElementTree as ET
 from dataclasses import dataclass
 from pathlib import Path
-from typing import Any, Literal
+from typing import Any
 
 import numpy as np
 from numpy.typing import NDArray
 
 from estimator.errors import RouteError
+from estimator.io.routeformats import ROUTE_SUFFIXES_TEXT, route_format
 from estimator.nav.frames import LocalFrame
 from estimator.route import Route
-
-RouteFormat = Literal["geojson", "gpx", "kml", "csv"]
-
-SUFFIXES: dict[str, RouteFormat] = {
-    ".geojson": "geojson",
-    ".json": "geojson",
-    ".gpx": "gpx",
-    ".kml": "kml",
-    ".csv": "csv",
-}
 
 F64 = NDArray[np.float64]
 
@@ -73,12 +64,10 @@ def read_route_lines(path: str | Path) -> tuple[RouteLine, ...]:
 
 
 def _candidates(p: Path) -> list[_Candidate]:
-    fmt = SUFFIXES.get(p.suffix.lower())
+    fmt = route_format(p)
     if fmt is None:
         raise RouteError(
-            p,
-            f"unknown route format '{p.suffix or p.name}': expected .geojson/.json, .gpx, .kml "
-            "or .csv",
+            p, f"unknown route format '{p.suffix or p.name}': expected {ROUTE_SUFFIXES_TEXT}"
         )
     text = _read_text(p)
     return {
@@ -224,6 +213,7 @@ def _geojson_geometry(p: Path, geom: Any) -> list[tuple[float, float, float]] | 
     if not isinstance(geom, dict):
         return None
     kind, coords = geom.get("type"), geom.get("coordinates")
+    parts: Any
     if kind == "LineString":
         parts = [coords]
     elif kind == "MultiLineString":

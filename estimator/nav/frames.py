@@ -12,7 +12,7 @@ import numpy as np
 import pyproj
 from numpy.typing import ArrayLike, NDArray
 
-pyproj.network.set_network_enabled(False)
+pyproj.network.set_network_enabled(False)  # type: ignore[attr-defined]  # imported there from pyproj._network, not re-exported by name
 
 _PIPELINE = (
     "+proj=pipeline +step +proj=axisswap +order=2,1 "

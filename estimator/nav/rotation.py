@@ -54,3 +54,32 @@ def body_rate_from_euler_rates(
             pitch_rate * sr + yaw_rate * cr * cp,
         ]
     )
+
+
+def quaternion_from_ros(
+    x: float, y: float, z: float, w: float
+) -> tuple[float, float, float, float]:
+    """A ROS message's quaternion, stored (x, y, z, w), in routefuse's order (w, x, y, z)."""
+    return w, x, y, z
+
+
+def dcm_from_quaternion(w: float, x: float, y: float, z: float) -> F64 | None:
+    """The rotation matrix of the scalar-first quaternion (w, x, y, z), normalised first, or
+    None if it has no direction (zero, NaN, inf)."""
+    with np.errstate(all="ignore"):
+        n = float(np.sqrt(x * x + y * y + z * z + w * w))
+    if not (np.isfinite(n) and n > 1e-9):
+        return None
+    x, y, z, w = x / n, y / n, z / n, w / n
+    return np.array(
+        [
+            [1 - 2 * (y * y + z * z), 2 * (x * y - z * w), 2 * (x * z + y * w)],
+            [2 * (x * y + z * w), 1 - 2 * (x * x + z * z), 2 * (y * z - x * w)],
+            [2 * (x * z - y * w), 2 * (y * z + x * w), 1 - 2 * (x * x + y * y)],
+        ]
+    )
+
+
+def yaw_from_quaternion(w: F64, x: F64, y: F64, z: F64) -> F64:
+    """ENU yaw of the body x axis (rad) of unit scalar-first quaternions, element-wise."""
+    return np.arctan2(2.0 * (w * z + x * y), 1.0 - 2.0 * (y * y + z * z))

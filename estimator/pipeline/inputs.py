@@ -11,7 +11,7 @@ import pyproj
 from numpy.typing import NDArray
 
 from estimator.errors import LogError, RouteError
-from estimator.io.rosbag import AUTO_TOPICS, TopicChoice, load_log
+from estimator.io import AUTO_TOPICS, TopicChoice, load_log
 from estimator.io.routefile import RouteLine, read_route_file, route_in_frame
 from estimator.log import Log
 from estimator.nav.frames import LocalFrame

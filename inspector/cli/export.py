@@ -8,7 +8,7 @@ import sys
 from pathlib import Path
 
 from estimator.errors import ConfigError, RoutefuseError
-from estimator.io.rosbag import TopicChoice
+from estimator.io import LOG_FORMATS_TEXT, ROUTE_FORMATS_TEXT, TopicChoice
 from inspector.cli.options import (
     add_outage_option,
     add_param_options,
@@ -26,8 +26,8 @@ HELP = (
 
 
 def add_arguments(parser: argparse.ArgumentParser) -> None:
-    parser.add_argument("log", nargs="?", metavar="LOG", help="ROS 1 .bag, ROS 2 folder or .mcap")
-    parser.add_argument("--route", metavar="ROUTE", help="route file (GeoJSON, GPX, KML, CSV)")
+    parser.add_argument("log", nargs="?", metavar="LOG", help=LOG_FORMATS_TEXT)
+    parser.add_argument("--route", metavar="ROUTE", help=f"route file ({ROUTE_FORMATS_TEXT})")
     parser.add_argument(
         "--batch",
         metavar="DIR_OR_GLOB",
@@ -89,8 +89,13 @@ class _Progress:
 
 
 def execute(args: argparse.Namespace) -> int:
-    from inspector.export.replay import ReplayOptions, export_batch, export_log, find_logs
-    from inspector.export.tables import format_summary
+    from inspector.export import (
+        ReplayOptions,
+        export_batch,
+        export_log,
+        find_logs,
+        format_summary,
+    )
 
     params = params_from_args(args)
     outages = tuple(parse_outage(o) for o in args.outage)

@@ -7,20 +7,13 @@ import csv
 import json
 import sys
 import time
-from collections.abc import Sequence
+from collections.abc import Iterable
 from pathlib import Path
-from typing import Any
+from typing import TYPE_CHECKING, Any
 
-import numpy as np
-
-from estimator.errors import ConfigError, RoutefuseError
-from estimator.evaluation.metrics import MethodMetrics, format_table, match_summary, method_metrics
-from estimator.io.rosbag import TopicChoice
-from estimator.log import Log
+from estimator.errors import RoutefuseError
+from estimator.io import LOG_FORMATS_TEXT, ROUTE_FORMATS_TEXT, TopicChoice
 from estimator.params import Method
-from estimator.pipeline.inputs import open_inputs
-from estimator.pipeline.runner import run
-from estimator.results import Run
 from inspector.cli.options import (
     add_outage_option,
     add_param_options,
@@ -28,6 +21,9 @@ from inspector.cli.options import (
     params_from_args,
     parse_outage,
 )
+
+if TYPE_CHECKING:
+    from estimator.results import Run
 
 NAME = "run"
 HELP = (
@@ -40,9 +36,9 @@ METHODS: tuple[Method, ...] = ("baseline", "proposed", "paper")
 
 
 def add_arguments(parser: argparse.ArgumentParser) -> None:
-    parser.add_argument("log", metavar="LOG", help="ROS 1 .bag, ROS 2 bag folder or .mcap file")
+    parser.add_argument("log", metavar="LOG", help=LOG_FORMATS_TEXT)
     parser.add_argument(
-        "--route", metavar="ROUTE", required=True, help="route file (GeoJSON, GPX, KML or CSV)"
+        "--route", metavar="ROUTE", required=True, help=f"route file ({ROUTE_FORMATS_TEXT})"
     )
     parser.add_argument(
         "--route-feature",
@@ -113,6 +109,8 @@ class _Progress:
 
 
 def _epoch_rows(r: Run) -> list[list[Any]]:
+    import numpy as np
+
     e = r.epochs
     geo = r.frame.to_geodetic(e.position)
     att = np.degrees(e.attitude)
@@ -144,45 +142,12 @@ _CSV_HEADER = [
 ]  # fmt: skip
 
 
-def _distance(r: Run) -> float:
-    p = r.epochs.position
-    return float(np.sum(np.hypot(*np.diff(p[:, :2], axis=0).T))) if len(p) > 1 else 0.0
-
-
-def results_document(
-    log_path: str | Path,
-    route_path: str | Path,
-    log: Log,
-    runs: dict[str, Run],
-    metrics: dict[str, MethodMetrics],
-    *,
-    outages: Sequence[tuple[float, float]] = (),
-) -> dict[str, Any]:
-    """The ``--json`` document (also written by ``routefuse export`` as metrics.json)."""
-    methods = list(runs)
-    first = next(iter(runs.values()))
-    matching = [m for m in methods if m != "baseline"]
-    summaries = {m: match_summary(runs[m]) for m in matching}
-    key = "proposed" if "proposed" in summaries else (matching[0] if matching else None)
-    return {
-        "log": str(log_path),
-        "route": str(route_path),
-        "duration_s": log.duration_s,
-        "distance_m": _distance(first),
-        "degraded_intervals": [[a - first.t0, b - first.t0] for a, b in first.degraded_intervals],
-        "methods": {m: metrics[m].to_dict() for m in methods},
-        "matches": summaries[key]
-        if key is not None
-        else {"attempted": 0, "accepted": 0, "rejected": {}},
-        "matches_by_method": summaries,
-        "t0": first.t0,
-        "outages": [list(o) for o in outages],
-        "n_epochs": {m: metrics[m].n_epochs for m in methods},
-        "warnings": list(dict.fromkeys(w for r in runs.values() for w in r.warnings)),
-    }
-
-
 def execute(args: argparse.Namespace) -> int:
+    # imported here, not above: building the parser (``routefuse --help``) stays light
+    from estimator.evaluation import format_table, match_summary, method_metrics
+    from estimator.evaluation.document import results_document
+    from estimator.pipeline import open_inputs, run_methods
+
     params = params_from_args(args)
     outages = [parse_outage(o) for o in args.outage]
     methods: list[Method] = list(dict.fromkeys(args.method or ("baseline", "proposed")))
@@ -194,68 +159,56 @@ def execute(args: argparse.Namespace) -> int:
         route_feature=args.route_feature,
         progress=lambda f: progress("loading", f),
     )
-    log, route, frame = inputs.log, inputs.route, inputs.frame
+    log, route = inputs.log, inputs.route
     assert route is not None
-    for a, b in outages:
-        if a >= log.duration_s:
-            raise ConfigError(
-                "--outage", f"{a:g}:{b:g} starts after the log ends ({log.duration_s:.1f} s)"
-            )
-    runs: dict[str, Run] = {}
-    previous: Run | None = None
-    for method in methods:
-        r = run(
-            log,
-            route,
-            params,
-            method=method,
-            frame=frame,
-            outages=outages,
-            progress=lambda f, m=method: progress(m, f),
-            reuse=previous,
-        )
-        runs[method] = r
-        previous = r
+    runs = run_methods(inputs, params, methods=methods, outages=outages, progress=progress).runs
     progress.done()
 
-    scenario = Path(args.log).name
-    rows, metrics = [], {}
-    for method, r in runs.items():
-        m = method_metrics(
+    named: dict[str, Run] = {method: r for method, r in runs.items()}
+    metrics = {
+        method: method_metrics(
             r, route, log, subtract_lane_offset=args.subtract_lane_offset, params=r.params
         )
-        metrics[method] = m
-        rows.append((scenario, method, m))
-    first = next(iter(runs.values()))
-    intervals = [[a - first.t0, b - first.t0] for a, b in first.degraded_intervals]
-    print(format_table(rows))
-    if intervals:
-        spans = ", ".join(f"{a:.1f}-{b:.1f} s" for a, b in intervals)
-        print(f"\nGNSS-degraded: {spans} (metrics over these intervals)")
-    else:
-        print("\nno GNSS-degraded interval in this log: every metric is empty (use --outage)")
-    matching = [m for m in methods if m != "baseline"]
-    summaries = {m: match_summary(runs[m]) for m in matching}
-    for m, s in summaries.items():
-        rejected = ", ".join(f"{k} {v}" for k, v in s["rejected"].items()) or "none"
-        print(f"{m}: {s['accepted']} of {s['attempted']} matches accepted; rejected by {rejected}")
-    warnings = dict.fromkeys(w for r in runs.values() for w in r.warnings)
-    for w in warnings:
-        print(f"routefuse run: warning: {w}", file=sys.stderr)
-
+        for method, r in named.items()
+    }
+    print(format_table([(Path(args.log).name, method, m) for method, m in metrics.items()]))
+    _print_notes(named, {m: match_summary(r) for m, r in named.items() if m != "baseline"})
     if args.json is not None:
-        doc = results_document(args.log, args.route, log, runs, metrics, outages=outages)
+        doc = results_document(args.log, args.route, log, named, metrics, outages=outages)
         try:
             args.json.write_text(json.dumps(doc, indent=2) + "\n", encoding="utf-8")
         except OSError as exc:
             raise RoutefuseError(args.json, f"cannot write: {exc.strerror or exc}") from None
     if args.csv is not None:
-        try:
-            with args.csv.open("w", newline="", encoding="utf-8") as f:
-                w = csv.writer(f)
-                w.writerow(_CSV_HEADER)
-                for r in runs.values():
-                    w.writerows(_epoch_rows(r))
-        except OSError as exc:
-            raise RoutefuseError(args.csv, f"cannot write: {exc.strerror or exc}") from None
+        _write_csv(args.csv, named.values())
     return 0
+
+
+def _print_notes(runs: dict[str, Run], summaries: dict[str, dict[str, Any]]) -> None:
+    """The degraded intervals, each matching method's match counts, the runs' warnings."""
+    first = next(iter(runs.values()))
+    intervals = [[a - first.t0, b - first.t0] for a, b in first.degraded_intervals]
+    if intervals:
+        spans = ", ".join(f"{a:.1f}-{b:.1f} s" for a, b in intervals)
+        print(f"\nGNSS-degraded: {spans} (metrics over these intervals)")
+    else:
+        print("\nno GNSS-degraded interval in this log: every metric is empty (use --outage)")
+    for method, s in summaries.items():
+        rejected = ", ".join(f"{k} {v}" for k, v in s["rejected"].items()) or "none"
+        print(
+            f"{method}: {s['accepted']} of {s['attempted']} matches accepted; "
+            f"rejected by {rejected}"
+        )
+    for warning in dict.fromkeys(w for r in runs.values() for w in r.warnings):
+        print(f"routefuse run: warning: {warning}", file=sys.stderr)
+
+
+def _write_csv(path: Path, runs: Iterable[Run]) -> None:
+    try:
+        with path.open("w", newline="", encoding="utf-8") as f:
+            writer = csv.writer(f)
+            writer.writerow(_CSV_HEADER)
+            for r in runs:
+                writer.writerows(_epoch_rows(r))
+    except OSError as exc:
+        raise RoutefuseError(path, f"cannot write: {exc.strerror or exc}") from None

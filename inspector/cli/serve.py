@@ -7,14 +7,26 @@ import sys
 import time
 from collections.abc import Sequence
 from pathlib import Path
+from typing import TYPE_CHECKING, Literal
 
 from estimator.errors import RoutefuseError
+from estimator.io import route_beside
 from inspector.cli.options import (
     add_outage_option,
     add_param_options,
     params_from_args,
     parse_outage,
 )
+from inspector.cli.samples import DEFAULT_SAMPLE, find_sample_logs, sample_log_candidates
+
+if TYPE_CHECKING:
+    import viser
+
+    from estimator.params import Params
+    from inspector.app import InspectorApp
+    from inspector.controller import Controller, Session
+
+MatchingMethod = Literal["proposed", "paper"]
 
 NAME = "serve"
 HELP = (
@@ -23,8 +35,8 @@ HELP = (
     "GNSS from an open-sky log to make it a tunnel test"
 )
 
-SAMPLE_LOGS = Path(__file__).resolve().parents[2] / "sample_logs"
-DEFAULT_SAMPLE = "long_tunnel"
+SAMPLE_LOGS = find_sample_logs()
+"""The bundled samples (None when this install has none): always listed in the file picker."""
 
 
 def add_arguments(parser: argparse.ArgumentParser) -> None:
@@ -65,35 +77,22 @@ def add_arguments(parser: argparse.ArgumentParser) -> None:
     add_param_options(parser)
 
 
-def _route_beside(log: Path) -> Path | None:
-    stem = log.name.split(".")[0]
-    for suffix in (
-        ".route.geojson",
-        ".route.gpx",
-        ".route.kml",
-        ".route.csv",
-        ".geojson",
-        ".gpx",
-        ".kml",
-    ):
-        candidate = log.parent / f"{stem}{suffix}"
-        if candidate.is_file():
-            return candidate
-    return None
-
-
 def resolve_inputs(log: str | None, route: str | None) -> tuple[Path, Path]:
     """The log and route to open first (the bundled sample when no log is given)."""
     if log is None:
+        if SAMPLE_LOGS is None:
+            looked = ", ".join(str(p) for p in sample_log_candidates())
+            raise RoutefuseError(
+                f"{DEFAULT_SAMPLE}.mcap",
+                f"the bundled sample log is not installed (looked in {looked}); give a LOG",
+            )
         log_path = SAMPLE_LOGS / f"{DEFAULT_SAMPLE}.mcap"
-        if not log_path.exists():
-            raise RoutefuseError(log_path, "the bundled sample log is missing")
     else:
         log_path = Path(log).expanduser()
         if not log_path.exists():
             raise RoutefuseError(log_path, "no such file or folder")
     if route is None:
-        found = _route_beside(log_path)
+        found = route_beside(log_path)
         if found is None:
             raise RoutefuseError(log_path, "no route beside the log; give one with --route")
         route_path = found
@@ -111,21 +110,22 @@ def start(
     data_dirs: list[str | Path],
     log: Path | None = None,
     route: Path | None = None,
-    params=None,
-    method="proposed",
+    params: Params | None = None,
+    method: MatchingMethod = "proposed",
     outages: Sequence[tuple[float, float]] = (),
     max_upload_bytes: int = 100 * 1024 * 1024,
     verbose: bool = False,
-):
+) -> tuple[viser.ViserServer, Controller, InspectorApp]:
     """Start the server and the controller (returns ``(server, controller, app)``; used by the
     command and by the tests). ``outages`` are injected into the first log only: they are
     times in that log."""
     import viser
 
     from inspector.app import InspectorApp
-    from inspector.controller import Controller, DataFolders, UploadFolder
+    from inspector.controller import Controller
+    from inspector.folders import DataFolders, UploadFolder
 
-    roots = [SAMPLE_LOGS, *data_dirs]
+    roots = [*([SAMPLE_LOGS] if SAMPLE_LOGS is not None else []), *data_dirs]
     for d in data_dirs:
         if not Path(d).is_dir():
             raise RoutefuseError(d, "--data-dir is not a folder")
@@ -148,7 +148,7 @@ def start(
     return server, controller, app
 
 
-def _listed_name(controller, path: Path, kind: str) -> str:
+def _listed_name(controller: Controller, path: Path, kind: str) -> str:
     listing = controller.folders.listing()
     table = listing.logs if kind == "log" else listing.routes
     for name, p in table.items():
@@ -158,7 +158,7 @@ def _listed_name(controller, path: Path, kind: str) -> str:
 
 
 def execute(args: argparse.Namespace) -> int:
-    from inspector.controller import format_outages
+    from inspector.timeline import format_outages
 
     params = params_from_args(args)
     outages = tuple(parse_outage(o) for o in args.outage)
@@ -185,7 +185,7 @@ def execute(args: argparse.Namespace) -> int:
     injected = f" and GNSS outages {format_outages(controller.outages)} s" if outages else ""
     print(f"loading {log.name} with route {route.name}{injected} ...", flush=True)
 
-    def loaded(session) -> None:
+    def loaded(session: Session) -> None:
         tl = session.timeline
         rejected = int((~tl.match_accepted).sum())
         print(

@@ -3,8 +3,8 @@
 :func:`export_log` runs the baseline and the compared method over one log and writes, into one
 folder, a replay of the 3D scene (drawn by the inspector's own scene layers into viser's scene
 serializer, so it shows exactly what the live UI shows), the paper's figures, the metrics, every
-match attempt, and the trajectories as CSV, GeoJSON and TUM. :func:`export_batch` does it for
-many logs and keeps going past a bad one.
+match attempt, and the trajectories as CSV, GeoJSON and TUM (for many logs:
+:mod:`inspector.export.batch`).
 
 Nothing here needs a display or a network: viser's server only binds the loopback interface to
 host the scene API the layers draw into; no browser ever connects to it.
@@ -14,7 +14,6 @@ from __future__ import annotations
 
 import contextlib
 import dataclasses
-import glob
 import io
 import math
 import socket
@@ -28,8 +27,9 @@ import numpy as np
 from numpy.typing import NDArray
 
 from estimator.errors import ConfigError, RoutefuseError
-from estimator.io.rosbag import AUTO_TOPICS, TopicChoice
+from estimator.io import AUTO_TOPICS, TopicChoice
 from estimator.params import Method, Params
+from estimator.results import Run
 from inspector.export import figures as export_figures
 from inspector.export import tables as export_tables
 from inspector.scene_data import SceneData
@@ -50,9 +50,6 @@ POSE_MARKER_FRACTION = 0.05
 than the live UI's)"""
 MAX_FRAMES = 20_000
 """refuse an explicit ``fps`` that would make a replay page of hundreds of MB"""
-
-LOG_SUFFIXES = (".mcap", ".bag")
-ROUTE_SUFFIX = ".route.geojson"
 
 
 @dataclass(frozen=True)
@@ -85,31 +82,6 @@ class ExportResult:
     """seconds per stage"""
 
 
-@dataclass(frozen=True)
-class BatchItem:
-    """One log of a batch: its result, or the one-line reason it failed."""
-
-    log: Path
-    out_dir: Path
-    result: ExportResult | None
-    error: str | None
-    seconds: float
-
-    @property
-    def ok(self) -> bool:
-        return self.error is None
-
-
-@dataclass(frozen=True)
-class BatchResult:
-    items: tuple[BatchItem, ...]
-    summary_csv: Path
-
-    @property
-    def failed(self) -> tuple[BatchItem, ...]:
-        return tuple(i for i in self.items if not i.ok)
-
-
 # ---------------------------------------------------------------------------------------------
 # one log
 
@@ -133,26 +105,14 @@ def export_log(
     ``outages``: (start, end) seconds after the log start where GNSS is removed, as
     ``routefuse run --outage``. ``route_feature``: which line of a route file holding several
     (name or index)."""
-    from estimator.pipeline.inputs import open_inputs
-    from estimator.pipeline.runner import run
+    from estimator.pipeline import open_inputs, run_methods
 
     log_path, route_path, out = Path(log_path), Path(route_path), Path(out_dir)
     params = params or Params()
     _check_replay_options(replay)
-    _make_dir(out)  # before the runs: a bad --out fails at once
-    report = progress or (lambda stage, fraction: None)
-    timings: dict[str, float] = {}
-    clock = time.perf_counter()
-
-    def stage(name: str, lo: float, hi: float) -> Callable[[float], None]:
-        return lambda f: report(name, lo + (hi - lo) * float(np.clip(f, 0.0, 1.0)))
-
-    def lap(name: str) -> None:
-        nonlocal clock
-        now = time.perf_counter()
-        timings[name] = now - clock
-        clock = now
-
+    make_dir(out)  # before the runs: a bad --out fails at once
+    steps = _Stages(progress or (lambda stage, fraction: None))
+    stage, lap = steps.stage, steps.lap
     inputs = open_inputs(
         log_path,
         route_path,
@@ -161,72 +121,90 @@ def export_log(
         progress=stage("loading", 0, 0.2),
     )
     lap("load_s")
-    for a, b in outages:
-        if a >= inputs.log.duration_s:
-            raise ConfigError(
-                "--outage",
-                f"{a:g}:{b:g} starts after the log ends ({inputs.log.duration_s:.1f} s)",
-            )
-    baseline = run(
-        inputs.log,
-        inputs.route,
+    stages = {
+        "baseline": stage("baseline run", 0.2, 0.35),
+        method: stage(f"{method} run", 0.35, 0.55),
+    }
+    session = run_methods(
+        inputs,
         params,
-        method="baseline",
-        frame=inputs.frame,
+        methods=("baseline", method),
         outages=outages,
-        progress=stage("baseline run", 0.2, 0.35),
+        progress=lambda m, f: stages[m](f),
     )
-    compared = run(
-        inputs.log,
-        inputs.route,
-        params,
-        method=method,
-        frame=inputs.frame,
-        outages=outages,
-        progress=stage(f"{method} run", 0.35, 0.55),
-        reuse=baseline,
-    )
+    baseline, compared = session["baseline"], session[method]
     lap("run_s")
+    doc = export_tables.metrics_document(
+        inputs, baseline, compared, log_path, route_path, outages=outages
+    )
     try:
-        report("tables", 0.55)
-        doc = export_tables.metrics_document(
-            inputs, baseline, compared, log_path, route_path, outages=outages
-        )
-        files = export_tables.write_tables(out, inputs, baseline, compared, doc)
-        lap("tables_s")
-        report("figures", 0.65)
-        scene = SceneData.build(
-            baseline=baseline, proposed=compared, route=inputs.route, log=inputs.log
-        )
-        files += export_figures.write_figures(out, inputs, baseline, compared, scene)
-        lap("figures_s")
-        frames = replay_times(scene, replay)
-        files += write_replay(
-            out,
-            scene,
-            frames,
-            degraded=compared.degraded_intervals,
-            time_lapse=_time_lapse(frames, replay),
-            progress=stage("replay", 0.75, 0.98),
-        )
-        lap("replay_s")
-        files += (export_tables.write_report(out, doc, files, timings),)
+        files, n_frames = _write_files(out, inputs, baseline, compared, doc, replay, steps)
     except OSError as exc:
         where = exc.filename or out
         raise RoutefuseError(where, f"cannot write: {exc.strerror or exc}") from None
-    report("done", 1.0)
+    steps.report("done", 1.0)
     return ExportResult(
         log=log_path,
         route=route_path,
         out_dir=out,
         files=files,
         metrics=doc,
-        frames=len(frames),
-        timings=timings,
+        frames=n_frames,
+        timings=steps.timings,
     )
 
 
-def _make_dir(path: Path) -> None:
+@dataclass
+class _Stages:
+    """The stages of one export on one progress bar, and the seconds each took."""
+
+    report: Progress
+    timings: dict[str, float] = field(default_factory=dict)
+    clock: float = field(default_factory=time.perf_counter)
+
+    def stage(self, name: str, lo: float, hi: float) -> Callable[[float], None]:
+        return lambda f: self.report(name, lo + (hi - lo) * float(np.clip(f, 0.0, 1.0)))
+
+    def lap(self, name: str) -> None:
+        now = time.perf_counter()
+        self.timings[name] = now - self.clock
+        self.clock = now
+
+
+def _write_files(
+    out: Path,
+    inputs: Any,
+    baseline: Run,
+    compared: Run,
+    doc: dict[str, Any],
+    replay: ReplayOptions,
+    steps: _Stages,
+) -> tuple[tuple[Path, ...], int]:
+    """Tables, figures, the replay and the report of two runs; the files and replay frames."""
+    steps.report("tables", 0.55)
+    files = export_tables.write_tables(out, inputs, baseline, compared, doc)
+    steps.lap("tables_s")
+    steps.report("figures", 0.65)
+    scene = SceneData.build(
+        baseline=baseline, proposed=compared, route=inputs.route, log=inputs.log
+    )
+    files += export_figures.write_figures(out, inputs, baseline, compared, scene)
+    steps.lap("figures_s")
+    frames = replay_times(scene, replay)
+    files += write_replay(
+        out,
+        scene,
+        frames,
+        degraded=compared.degraded_intervals,
+        time_lapse=_time_lapse(frames, replay),
+        progress=steps.stage("replay", 0.75, 0.98),
+    )
+    steps.lap("replay_s")
+    files += (export_tables.write_report(out, doc, files, steps.timings),)
+    return files, len(frames)
+
+
+def make_dir(path: Path) -> None:
     try:
         path.mkdir(parents=True, exist_ok=True)
     except OSError as exc:
@@ -393,89 +371,3 @@ def _place_camera(server: Any, scene: SceneData) -> None:
     cam.up = (0.0, 0.0, 1.0)
     cam.position = (cx, cy - 0.001 * height, height)
     cam.look_at = (cx, cy, 0.0)
-
-
-# ---------------------------------------------------------------------------------------------
-# many logs
-
-
-def find_logs(spec: str | Path) -> list[Path]:
-    """The logs a batch covers: the ``.mcap``/``.bag`` files and ROS 2 bag folders directly in
-    a folder, or whatever a glob pattern matches."""
-    p = Path(spec).expanduser()
-    if p.is_dir():
-        found = [
-            c
-            for c in sorted(p.iterdir())
-            if (c.is_file() and c.suffix.lower() in LOG_SUFFIXES)
-            or (c.is_dir() and (c / "metadata.yaml").is_file())
-        ]
-    else:
-        found = [Path(m) for m in sorted(glob.glob(str(p)))]
-        found = [m for m in found if not m.name.endswith(ROUTE_SUFFIX)]
-    if not found:
-        raise RoutefuseError(spec, "no logs found (a folder of .mcap/.bag files, or a glob)")
-    return found
-
-
-def route_beside(log: Path) -> Path:
-    """``<stem>.route.geojson`` next to the log, as the sample logs are named."""
-    stem = log.name.split(".")[0]
-    route = log.parent / f"{stem}{ROUTE_SUFFIX}"
-    if not route.is_file():
-        raise RoutefuseError(log, f"no route {route.name} beside the log")
-    return route
-
-
-def export_batch(
-    logs: Sequence[Path],
-    out_dir: str | Path,
-    *,
-    params: Params | None = None,
-    method: Method = "proposed",
-    outages: Sequence[tuple[float, float]] = (),
-    topics: TopicChoice = AUTO_TOPICS,
-    replay: ReplayOptions = ReplayOptions(),
-    progress: Callable[[int, int, Path, str, float], None] | None = None,
-) -> BatchResult:
-    """Export each log into ``out_dir/<stem>/`` and write ``out_dir/summary.csv``. A log that
-    fails (no route beside it, unreadable, ...) is recorded with its one-line error and the
-    batch goes on. ``progress(i, n, log, stage, fraction)``."""
-    out = Path(out_dir)
-    _make_dir(out)
-    items: list[BatchItem] = []
-    used: set[str] = set()
-    for i, log in enumerate(logs):
-        name = log.name.split(".")[0] or "log"
-        folder, k = name, 2
-        while folder in used:
-            folder, k = f"{name}-{k}", k + 1
-        used.add(folder)
-        target = out / folder
-        started = time.perf_counter()
-
-        def report(stage: str, fraction: float, i: int = i, log: Path = log) -> None:
-            if progress is not None:
-                progress(i, len(logs), log, stage, fraction)
-
-        result, error = None, None
-        try:
-            result = export_log(
-                log,
-                route_beside(log),
-                target,
-                params=params,
-                method=method,
-                outages=outages,
-                topics=topics,
-                replay=replay,
-                progress=report,
-            )
-        except RoutefuseError as exc:
-            error = str(exc)
-        except Exception as exc:  # one broken log must not stop the batch
-            error = f"{log}: internal error: {type(exc).__name__}: {exc}"
-        items.append(BatchItem(log, target, result, error, time.perf_counter() - started))
-        report("failed" if error else "done", 1.0)
-    summary = export_tables.write_summary(out / "summary.csv", items)
-    return BatchResult(tuple(items), summary)

@@ -25,7 +25,7 @@ from estimator.evaluation.metrics import method_metrics
 from estimator.log import Log
 from estimator.nav.frames import LocalFrame
 from estimator.nav.rotation import dcm_from_euler
-from estimator.results import Run
+from estimator.results import GateDecision, Run
 from inspector.export.figures import (
     ACCEPTED_COLOR,
     OUTAGE_COLOR,
@@ -37,7 +37,7 @@ from inspector.plots import BASELINE_COLOR, PROPOSED_COLOR
 from inspector.scene_data import display_polyline
 
 if TYPE_CHECKING:
-    from inspector.export.replay import BatchItem
+    from inspector.export.batch import BatchItem
 
 F64 = NDArray[np.float64]
 
@@ -54,9 +54,9 @@ def metrics_document(
     outages: Sequence[tuple[float, float]] = (),
 ) -> dict[str, Any]:
     """The ``routefuse run --json`` document of the two runs (built by the same function)."""
-    from inspector.cli.run import results_document
+    from estimator.evaluation.document import results_document
 
-    runs = {r.method: r for r in (baseline, compared)}
+    runs: dict[str, Run] = {r.method: r for r in (baseline, compared)}
     metrics = {
         m: method_metrics(r, inputs.route, inputs.log, params=r.params) for m, r in runs.items()
     }
@@ -137,6 +137,12 @@ def _xy(a: Any) -> tuple[float, float]:
     return (float(v[0]), float(v[1])) if v.shape == (2,) else (math.nan, math.nan)
 
 
+def _gate_cell(g: GateDecision) -> float:
+    """A gate's value as the table prints it: a rival's margin is capped at 1e9, the table's
+    text for 'no rival' (+inf in the record)."""
+    return min(g.value, 1e9) if g.gate.rival is not None else g.value
+
+
 def write_matches_csv(path: Path, run: Run) -> None:
     """One row per match attempt: time, verdict, every gate's value / threshold / verdict
     ("pass", "fail", or empty when the attempt stopped before it), then the fit and the
@@ -147,12 +153,12 @@ def write_matches_csv(path: Path, run: Run) -> None:
         for g in m.gates:
             if g.name not in gates:
                 gates.append(g.name)
-        for k in m.extra:
+        for k in m.diagnostics():
             if k not in extras:
                 extras.append(k)
     header = ["index", "t_s", "time", "verdict", "accepted"]
-    for g in gates:
-        header += [f"{g}_value", f"{g}_threshold", f"{g}_verdict"]
+    for name in gates:
+        header += [f"{name}_value", f"{name}_threshold", f"{name}_verdict"]
     header += [
         "rotation_deg", "translation_e_m", "translation_n_m", "residual_m", "pairs",
         "heading_cos", "lane_offset_m", "p_dr_e_m", "p_dr_n_m", "pseudo_e_m", "pseudo_n_m",
@@ -165,11 +171,11 @@ def write_matches_csv(path: Path, run: Run) -> None:
         row: list[Any] = [m.index, m.t - run.t0, f"{m.t:.6f}", m.verdict, m.accepted]
         by_name = {g.name: g for g in m.gates}
         for name in gates:
-            g = by_name.get(name)
+            gate = by_name.get(name)
             row += (
                 [None, None, None]
-                if g is None
-                else [g.value, g.threshold, "pass" if g.passed else "fail"]
+                if gate is None
+                else [_gate_cell(gate), gate.threshold, "pass" if gate.passed else "fail"]
             )
         cov = np.asarray(m.obs_cov, np.float64)
         sig = np.sqrt(np.clip(np.diag(cov), 0, None)) if cov.shape == (2, 2) else (math.nan,) * 2
@@ -188,7 +194,8 @@ def write_matches_csv(path: Path, run: Run) -> None:
             *m.route_s,
             "; ".join(f"{g.name}: {g.note}" for g in m.gates if g.note),
         ]
-        row += [m.extra.get(k) for k in extras]
+        diagnostics = m.diagnostics()
+        row += [diagnostics.get(k) for k in extras]
         rows.append(row)
     _write_csv(path, header, rows)
 
@@ -317,12 +324,12 @@ def write_geojson(
         features.append(_line(frame, truth[1][:, :2], {"name": "truth", "stroke": TRUTH_COLOR}))
     ep = compared.epochs
     for a, b in compared.degraded_intervals:
-        m = (ep.t >= a) & (ep.t <= b)
-        if m.sum() >= 2:
+        inside = (ep.t >= a) & (ep.t <= b)
+        if inside.sum() >= 2:
             features.append(
                 _line(
                     frame,
-                    ep.position[m, :2],
+                    ep.position[inside, :2],
                     {
                         "name": "GNSS outage",
                         "start_s": a - compared.t0,

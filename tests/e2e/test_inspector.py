@@ -173,7 +173,7 @@ def _showcase_attempt(session) -> int:
     for i, m in enumerate(session.proposed.matches):
         if not m.accepted or not session.proposed.epochs.degraded[m.epoch]:
             continue
-        if m.extra.get("window_length_m", 0.0) > 300.0 or m.n_pairs < 20:
+        if m.window_length_m > 300.0 or m.n_pairs < 20:
             continue
         nu = float(np.hypot(*m.innovation))
         if nu > best_nu:

@@ -48,7 +48,7 @@ FRAME_RATE_JS = """() => new Promise(done => {
 def _route_for(name: str, log_path: Path, tmp_path: Path) -> Path:
     if name == "comma2k19":
         return DATA / "comma2k19" / "i280_route.geojson"
-    from estimator.io.rosbag import load_log
+    from estimator.io import load_log
     from estimator.io.routebuild import route_from_gnss
 
     route = tmp_path / "husky_test1.route.geojson"

@@ -20,7 +20,7 @@ TIMEOUT_MS = 180_000
 @pytest.fixture(scope="module")
 def replay(tmp_path_factory) -> Path:
     from estimator.sim import simulate
-    from inspector.export.replay import ReplayOptions, export_log
+    from inspector.export import ReplayOptions, export_log
 
     sim_dir = tmp_path_factory.mktemp("sim")
     log, route = simulate("short_tunnel", seed=1, duration_s=60.0).write(sim_dir)

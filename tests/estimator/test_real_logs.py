@@ -10,11 +10,11 @@ import numpy as np
 import pytest
 
 from estimator.evaluation.metrics import match_summary, method_metrics
-from estimator.io.rosbag import load_log
+from estimator.io import load_log
 from estimator.io.routebuild import route_from_gnss
 from estimator.params import Params, load_params
 from estimator.pipeline.inputs import open_inputs
-from estimator.pipeline.runner import run
+from estimator.pipeline import run
 
 REPO = Path(__file__).resolve().parents[2]
 DATA = REPO.parent / "shared" / "data"

@@ -4,12 +4,13 @@ use the real runner on a sample log)."""
 from __future__ import annotations
 
 from dataclasses import dataclass
+from pathlib import Path
 
 import numpy as np
 
 from estimator.nav.frames import LocalFrame
 from estimator.params import Params
-from estimator.results import Epochs, GateDecision, MatchRecord, Run
+from estimator.results import Epochs, Gate, GateDecision, MatchRecord, Run
 from estimator.route import Route
 
 T0 = 1_700_000_000.0
@@ -60,9 +61,9 @@ def make_run(
         win = route.point_at(win_s) + np.array([0.0, 3.0])
         ok = k not in rejected
         gates = (
-            GateDecision("min_pairs", 21.0, 20.0, ">=", True),
-            GateDecision("heading_cos", 0.999, float(np.cos(np.radians(10))), ">=", True),
-            GateDecision("residual_m", 1.0 if ok else 7.5, 3.0, "<=", ok),
+            GateDecision(Gate.MIN_PAIRS, 21.0, 20.0, ">=", True),
+            GateDecision(Gate.HEADING, 0.999, float(np.cos(np.radians(10))), ">=", True),
+            GateDecision(Gate.RESIDUAL, 1.0 if ok else 7.5, 3.0, "<=", ok),
         )
         matches.append(
             MatchRecord(
@@ -113,3 +114,19 @@ def fake_run(inputs, params, method, progress, reuse, *, outages=()):
     progress(0.5, "running")
     drift = 30.0 if method == "baseline" else params.gates.max_residual_m
     return make_run(drift=drift, method=method, params=params)
+
+
+def data_folder(tmp_path: Path) -> Path:
+    """A data folder with a log, a route, a ROS 2 bag folder and a file that is neither."""
+    d = tmp_path / "data"
+    (d / "sub").mkdir(parents=True)
+    (d / "drive.mcap").write_bytes(b"x")
+    (d / "drive.route.geojson").write_text("{}")
+    (d / "sub" / "old.bag").write_bytes(b"x")
+    (d / "sub" / "old.gpx").write_text("<gpx/>")
+    (d / "notes.txt").write_text("not offered")
+    bag2 = d / "ros2_bag"
+    bag2.mkdir()
+    (bag2 / "metadata.yaml").write_text("rosbag2_bagfile_information: {}")
+    (bag2 / "ros2_bag_0.db3").write_bytes(b"x")
+    return d

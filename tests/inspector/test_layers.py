@@ -47,7 +47,7 @@ def test_draw_moves_the_vehicle_and_switches_the_match(server):
     assert label.text == "#1 accepted" and label.visible
     window = match._handles["window"].points.copy()
     layers.draw(T0 + 50)
-    assert label.text == "#2 rejected: residual_m"
+    assert label.text == "#2 rejected: residual"
     assert not np.allclose(match._handles["window"].points, window)
     layers.draw(T0 + 70)  # 10 s after the last attempt: the match layer hides
     assert not label.visible and not match._handles["window"].visible

@@ -16,7 +16,7 @@ import numpy as np
 import pytest
 
 from estimator.errors import RoutefuseError
-from estimator.io.bagwrite import write_bag
+from estimator.io import write_bag
 from estimator.log import Log
 from estimator.results import Run
 from estimator.sim import Simulation, simulate

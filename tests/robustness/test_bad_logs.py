@@ -24,7 +24,7 @@ from _badinputs import (
 )
 
 from estimator.errors import LogError
-from estimator.io.rosbag import load_log
+from estimator.io import load_log
 from estimator.log import GnssData, ImuData
 from estimator.pipeline.inputs import open_inputs
 
@@ -202,7 +202,7 @@ def test_huge_file_is_never_read_into_memory(tmp_path: Path, name: str, head: by
 
 
 def test_wrong_magic_is_refused_before_hashing(tmp_path: Path, monkeypatch) -> None:
-    import estimator.io.rosbag as bagio
+    import estimator.io.cache as bagio
 
     def no_hash(*args, **kwargs):
         raise AssertionError("the file was hashed")

@@ -28,8 +28,8 @@ from _badinputs import (
 from estimator.errors import RouteError
 from estimator.io.routefile import MAX_ROUTE_BYTES, read_route_file
 from estimator.params import Params
+from estimator.pipeline import run
 from estimator.pipeline.inputs import open_inputs
-from estimator.pipeline.runner import run
 
 BOMB = """<?xml version="1.0"?>
 <!DOCTYPE lolz [

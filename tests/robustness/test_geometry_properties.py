@@ -14,7 +14,7 @@ import pyproj
 from hypothesis import assume, given, settings
 from hypothesis import strategies as st
 
-from estimator.matching.match import kabsch_2d, resample_polyline
+from estimator.matching import kabsch_2d, resample_polyline
 from estimator.nav.frames import LocalFrame
 from estimator.route import Route
 

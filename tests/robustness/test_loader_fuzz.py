@@ -17,8 +17,7 @@ from hypothesis import HealthCheck, given, settings
 from hypothesis import strategies as st
 
 from estimator.errors import LogError
-from estimator.io.bagwrite import StaticTransform, write_bag
-from estimator.io.rosbag import load_log
+from estimator.io import StaticTransform, load_log, write_bag
 from estimator.log import GnssData, ImuData, Log, TruthData, WheelData
 
 STORAGES = ("mcap", "mcap-folder", "sqlite3", "ros1")

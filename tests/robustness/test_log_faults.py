@@ -15,7 +15,7 @@ from _faultdrive import T0, FaultDrive, make_drive, route_along
 
 from estimator.log import GnssData, ImuData, Log, WheelData
 from estimator.params import Params
-from estimator.pipeline.runner import run
+from estimator.pipeline import run
 from estimator.results import Run
 from estimator.route import Route
 

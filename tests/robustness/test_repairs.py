@@ -22,11 +22,10 @@ from _badinputs import (
     write_log,
 )
 
-from estimator.io.rosbag import load_log
+from estimator.io import load_log
 from estimator.log import GnssData, ImuData, Log, WheelData
 from estimator.params import Params
-from estimator.pipeline.inputs import open_inputs
-from estimator.pipeline.runner import run
+from estimator.pipeline import open_inputs, run
 
 IMU_BAD = np.array([100, 101, 2000, 3000, 3001, 3002])
 WHEEL_BAD = np.array([50, 51, 1000])

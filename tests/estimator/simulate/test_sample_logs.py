@@ -7,10 +7,10 @@ from pathlib import Path
 import numpy as np
 import pytest
 
-from estimator.io.rosbag import load_log
+from estimator.io import load_log
 from estimator.sim import simulate
-from inspector.cli.info import gnss_outages
 from inspector.cli.main import main
+from inspector.cli.summary import gnss_outages
 
 SAMPLE_LOGS = Path(__file__).resolve().parents[3] / "sample_logs"
 NAMES = ("long_tunnel", "spiral_tunnel", "multi_tunnel", "monaco_tunnel")

@@ -8,7 +8,7 @@ import numpy as np
 import pytest
 
 from estimator.errors import ConfigError
-from estimator.io.rosbag import load_log
+from estimator.io import load_log
 from estimator.io.routefile import load_route
 from estimator.nav.frames import LocalFrame
 from estimator.route import Route

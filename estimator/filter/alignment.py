@@ -1,0 +1,176 @@
+"""Initial alignment: the state and covariance at the IMU sample of the aligning fix.
+
+Heading: configured, or the chord between the first two fixes ``sensors.align_distance_m``
+apart (at the chord's mid-time), carried to the second fix with the gyro. Roll and pitch: the
+accelerometer averaged over the last second, less the motion's own acceleration (from the
+wheel or GNSS speed and the yaw rate). Covariances say how good each of these is."""
+
+from __future__ import annotations
+
+import math
+from collections.abc import Callable
+
+import numpy as np
+from numpy.typing import NDArray
+
+from estimator.errors import LogError
+from estimator.filter.layout import C_SCALE_ON, NE, NX, X_POS, X_QUAT, X_SCALE, X_VEL
+from estimator.filter.quaternion import euler_to_quat, quat_to_dcm
+from estimator.params import Params
+
+F64 = NDArray[np.float64]
+
+MG = 9.80665e-3
+"""m/s^2 per milli-g"""
+DEG_H = math.pi / 180 / 3600
+"""rad/s per deg/h"""
+
+
+def align(
+    src: str,
+    imu_t: F64,
+    gyro: F64,
+    accel: F64,
+    still: NDArray[np.bool_],
+    wheel_t: F64,
+    wheel_v: F64,
+    gnss_t: F64,
+    gnss_pos: F64,
+    gnss_var: F64,
+    p: Params,
+    cfg: F64,
+) -> tuple[F64, F64, int, float]:
+    """(x0, P0, IMU index k0, time of the aligning fix). ``src`` names the log in errors."""
+    s = p.sensors
+    use = np.flatnonzero(gnss_t >= imu_t[0])
+    if len(use) == 0:
+        raise LogError(src, "every GNSS fix is before the first IMU sample")
+    yaw_rate = gyro[:, 2]
+    cum_yaw = np.r_[0.0, np.cumsum(0.5 * (yaw_rate[1:] + yaw_rate[:-1]) * np.diff(imu_t))]
+
+    def yaw_between(t0: float, t1: float) -> float:
+        return float(np.interp(t1, imu_t, cum_yaw) - np.interp(t0, imu_t, cum_yaw))
+
+    speed: float | None
+    if s.initial_heading_deg is not None:
+        j = int(use[0])
+        yaw = math.radians(s.initial_heading_deg)
+        sig_yaw = math.radians(2.0)
+        speed = None
+    else:
+        found = _chord_heading(use, gnss_t, gnss_pos, gnss_var, wheel_t, wheel_v, p, yaw_between)
+        if found is None:
+            raise LogError(
+                src,
+                f"cannot align: the GNSS track never moves {s.align_distance_m:g} m in a "
+                "fairly straight line; set sensors.initial_heading_deg",
+            )
+        j, yaw, sig_yaw, speed = found
+    t_fix = float(gnss_t[j])
+    k0 = int(np.searchsorted(imu_t, t_fix, side="right") - 1)
+    k0 = max(k0, 0)
+    t0 = float(imu_t[k0])
+    speed, acc_x = _speed_at(t0, wheel_t, wheel_v, speed)
+    if still[k0] and abs(speed) < 1.0:
+        # without wheel speed the IMU-only stillness test also fires on a smooth cruise; a GNSS
+        # chord that moved says otherwise
+        speed = 0.0
+    roll, pitch, sig_tilt = _tilt(imu_t, gyro, accel, still, t0, k0, speed, acc_x)
+    q = euler_to_quat(roll, pitch, yaw)
+    C = np.empty((3, 3))
+    quat_to_dcm(q, C)
+    v = np.array([math.cos(yaw), math.sin(yaw), 0.0]) * speed
+    lever = C @ np.asarray(s.gnss_lever_arm_m, np.float64)
+    x0 = np.zeros(NX)
+    x0[X_POS : X_POS + 3] = gnss_pos[j] - lever - v * (t_fix - t0)
+    x0[X_VEL : X_VEL + 3] = v
+    x0[X_QUAT : X_QUAT + 4] = q
+    x0[X_SCALE] = 1.0
+    n = p.noise
+    sig_v = n.velocity_init_sigma_m_s
+    diag = np.zeros(NE)
+    diag[0:3] = [sig_tilt**2, sig_tilt**2, sig_yaw**2]
+    diag[3:6] = sig_v**2
+    diag[6:9] = gnss_var[j]
+    diag[9:12] = (n.gyro_bias_init_sigma_deg_h * DEG_H) ** 2
+    diag[12:15] = (n.accel_bias_init_sigma_mg * MG) ** 2
+    diag[15] = n.wheel_scale_sigma**2 if cfg[C_SCALE_ON] > 0 else 0.0
+    return x0, np.diag(diag), k0, t_fix
+
+
+def _chord_heading(
+    use: NDArray[np.intp],
+    gnss_t: F64,
+    gnss_pos: F64,
+    gnss_var: F64,
+    wheel_t: F64,
+    wheel_v: F64,
+    p: Params,
+    yaw_between: Callable[[float, float], float],
+) -> tuple[int, float, float, float] | None:
+    """(fix index, yaw, yaw sigma, speed) from the first fairly straight chord of
+    ``align_distance_m``, or None."""
+    d_min = p.sensors.align_distance_m
+    max_span = max(20.0, d_min / 0.5)
+    for i in use:
+        hi = np.searchsorted(gnss_t, gnss_t[i] + max_span, side="right")
+        d = np.hypot(*(gnss_pos[i + 1 : hi, :2] - gnss_pos[i, :2]).T)
+        far = np.flatnonzero(d >= d_min)
+        if len(far) == 0:
+            continue
+        jj = int(i + 1 + far[0])
+        turn = yaw_between(gnss_t[i], gnss_t[jj])
+        if abs(turn) > math.radians(30):
+            continue
+        chord = gnss_pos[jj, :2] - gnss_pos[i, :2]
+        t_mid = 0.5 * (gnss_t[i] + gnss_t[jj])
+        yaw = math.atan2(chord[1], chord[0]) + yaw_between(t_mid, gnss_t[jj])
+        if len(wheel_t) > 1:
+            w_sel = (wheel_t >= gnss_t[i]) & (wheel_t <= gnss_t[jj])
+            if w_sel.any() and np.mean(wheel_v[w_sel]) < 0:
+                yaw += math.pi
+        sig_h = math.sqrt(gnss_var[i, 0] + gnss_var[jj, 0])
+        sig_yaw = math.sqrt(
+            (sig_h / float(np.hypot(*chord))) ** 2 + (0.2 * turn) ** 2 + math.radians(1.0) ** 2
+        )
+        speed = float(np.hypot(*chord)) / (gnss_t[jj] - gnss_t[i])
+        return jj, yaw, sig_yaw, speed
+    return None
+
+
+def _speed_at(
+    t0: float, wheel_t: F64, wheel_v: F64, chord_speed: float | None
+) -> tuple[float, float]:
+    """Speed and along-track acceleration at ``t0``: from the wheels when they cover it, else
+    the chord's speed (0 when the heading was configured) and no acceleration."""
+    if len(wheel_t) > 1 and wheel_t[0] <= t0 + 0.5 and wheel_t[-1] >= t0 - 0.5:
+        speed = float(np.interp(t0, wheel_t, wheel_v))
+        sel = (wheel_t >= t0 - 1.0) & (wheel_t <= t0)
+        if sel.sum() >= 2 and np.ptp(wheel_t[sel]) > 0.2:
+            acc_x = float(np.polyfit(wheel_t[sel] - t0, wheel_v[sel], 1)[0])
+        else:
+            acc_x = 0.0
+        return speed, acc_x
+    return (0.0 if chord_speed is None else chord_speed), 0.0
+
+
+def _tilt(
+    imu_t: F64,
+    gyro: F64,
+    accel: F64,
+    still: NDArray[np.bool_],
+    t0: float,
+    k0: int,
+    speed: float,
+    acc_x: float,
+) -> tuple[float, float, float]:
+    """Roll, pitch and their sigma from the accelerometer over the last second."""
+    sel = (imu_t >= t0 - 1.0) & (imu_t <= t0)
+    f = accel[sel].mean(axis=0) if sel.any() else accel[k0]
+    w_z = float(gyro[sel, 2].mean()) if sel.any() else 0.0
+    up = f - np.array([acc_x, speed * w_z, 0.0])
+    up /= max(float(np.linalg.norm(up)), 1e-9)
+    roll = math.atan2(up[1], up[2])
+    pitch = math.atan2(up[0], math.hypot(up[1], up[2]))
+    sig_tilt = math.radians(0.3 if still[sel].all() else 1.5)
+    return roll, pitch, sig_tilt

@@ -1,0 +1,170 @@
+"""The filter as a Python object: the kernel's state arrays, the output rows, and the stepping
+of the compiled loop (:func:`estimator.filter.kernel.run_until`) to a stop time, growing the
+output buffer and reporting progress on the way."""
+
+from __future__ import annotations
+
+from collections.abc import Callable
+
+import numpy as np
+from numpy.typing import NDArray
+
+from estimator.errors import LogError
+from estimator.filter.kernel import run_until, write_row
+from estimator.filter.layout import (
+    A_TIME,
+    I_IMU,
+    I_OUT,
+    NO,
+    O_GNSS,
+    O_POS,
+    O_RPY,
+    O_SIG_POS,
+    O_SIG_YAW,
+    O_T,
+    O_VEL,
+    STATUS_DIVERGED,
+    STATUS_FULL,
+)
+from estimator.filter.setup import FilterInputs
+from estimator.results import Epochs
+
+F64 = NDArray[np.float64]
+I64 = NDArray[np.int64]
+ProgressFn = Callable[[float], None]
+FilterState = tuple[F64, F64, F64, I64]
+"""(x, P, aux, idx): everything the kernel carries between two calls"""
+GnssArrays = tuple[F64, F64, F64]
+"""(times, ENU positions, variances) of the fixes the kernel uses"""
+
+CHUNK_S = 30.0
+"""log seconds per kernel call when progress is reported"""
+
+
+class Filter:
+    """The state (``x``, ``P``, ``aux``, ``idx``) and output rows (``out``) of one run over
+    ``inputs``. ``source`` and ``t_start`` name the log and its start in error messages."""
+
+    def __init__(
+        self,
+        inputs: FilterInputs,
+        *,
+        source: str,
+        t_start: float,
+        progress: ProgressFn | None = None,
+    ) -> None:
+        self.inp = inputs
+        self.source = source
+        self.t_start = t_start
+        self.progress = progress
+        self.x, self.P, self.aux, self.idx = self.snapshot_of(
+            (inputs.x0, inputs.P0, inputs.aux0, inputs.idx0)
+        )
+        self.out: F64 = np.zeros((0, NO))
+
+    @staticmethod
+    def snapshot_of(state: FilterState) -> FilterState:
+        x, P, aux, idx = state
+        return x.copy(), P.copy(), aux.copy(), idx.copy()
+
+    def snapshot(self) -> FilterState:
+        """A copy of the state (a checkpoint)."""
+        return self.snapshot_of((self.x, self.P, self.aux, self.idx))
+
+    def set_state(self, state: FilterState) -> None:
+        self.x, self.P, self.aux, self.idx = self.snapshot_of(state)
+
+    @property
+    def n_out(self) -> int:
+        """Output rows written so far."""
+        return int(self.idx[I_OUT])
+
+    @property
+    def t_first(self) -> float:
+        """Time of the first IMU sample the filter processes (the aligning one)."""
+        return float(self.inp.imu_t[self.inp.idx0[I_IMU] - 1])
+
+    def alloc(self, n_rows: int) -> None:
+        self.out = np.zeros((n_rows, NO))
+
+    def grow(self) -> None:
+        self.out = np.vstack([self.out, np.zeros((len(self.out) // 2 + 16, NO))])
+
+    def write_row(self) -> int:
+        """Write the current state as an output row; returns its index."""
+        if self.idx[I_OUT] >= len(self.out) - 1:
+            self.grow()
+        write_row(self.x, self.P, self.aux, self.idx, self.out)
+        return int(self.idx[I_OUT]) - 1
+
+    def advance(self, t_stop: float, gnss: GnssArrays | None = None) -> None:
+        """Run the filter to ``t_stop``; ``gnss`` replaces the log's fixes (the portal re-run)."""
+        inp = self.inp
+        gnss_t, gnss_pos, gnss_var = (
+            (inp.gnss_t, inp.gnss_pos, inp.gnss_var) if gnss is None else gnss
+        )
+        t_end = float(inp.imu_t[-1])
+        t_first = self.t_first
+        while True:
+            t_now = self.aux[A_TIME]
+            target = t_stop
+            if self.progress is not None:
+                # from the next IMU sample: a gap longer than a chunk must not stall the loop
+                k = int(self.idx[I_IMU])
+                t_next = float(inp.imu_t[k]) if k < len(inp.imu_t) else t_now
+                target = min(t_stop, max(t_now, t_next) + CHUNK_S)
+            status = run_until(
+                target,
+                self.x,
+                self.P,
+                self.aux,
+                self.idx,
+                inp.imu_t,
+                inp.gyro,
+                inp.accel,
+                inp.still,
+                inp.wheel_t,
+                inp.wheel_v,
+                gnss_t,
+                gnss_pos,
+                gnss_var,
+                inp.cfg,
+                self.out,
+            )
+            if status == STATUS_FULL:
+                self.grow()
+                continue
+            if status == STATUS_DIVERGED:
+                raise LogError(
+                    self.source,
+                    "the filter diverged (non-finite state) at "
+                    f"t = {self.aux[A_TIME] - self.t_start:.2f} s",
+                )
+            if self.progress is not None:
+                span = max(t_end - t_first, 1e-9)
+                self.progress(min(1.0, (self.aux[A_TIME] - t_first) / span))
+            if target >= t_stop or self.idx[I_IMU] >= len(inp.imu_t):
+                return
+
+
+def epochs_of(out: F64, n: int, degraded: tuple[tuple[float, float], ...]) -> Epochs:
+    """The public per-epoch results of the first ``n`` output rows."""
+    o = out[:n]
+    t = o[:, O_T].copy()
+    starts = np.array([a for a, _ in degraded])
+    ends = np.array([b for _, b in degraded])
+    if len(starts):
+        j = np.searchsorted(starts, t, side="right") - 1
+        inside = (j >= 0) & (t <= ends[np.clip(j, 0, None)])
+    else:
+        inside = np.zeros(n, bool)
+    return Epochs(
+        t=t,
+        position=np.ascontiguousarray(o[:, O_POS : O_POS + 3]),
+        velocity=np.ascontiguousarray(o[:, O_VEL : O_VEL + 3]),
+        attitude=np.ascontiguousarray(o[:, O_RPY : O_RPY + 3]),
+        position_sigma=np.ascontiguousarray(o[:, O_SIG_POS : O_SIG_POS + 3]),
+        yaw_sigma=o[:, O_SIG_YAW].copy(),
+        gnss_used=o[:, O_GNSS] > 0,
+        degraded=inside,
+    )

@@ -1,0 +1,267 @@
+"""The compiled filter loop: per IMU sample, mechanisation, covariance propagation, the
+wheel / NHC / ZUPT updates at the aid rate, the GNSS fixes up to the sample, and output rows.
+The Python driver only steps in at the (low-rate) route-match attempts; the loop stops at any
+time and resumes bit-identically, since everything it carries is in plain arrays
+(:mod:`estimator.filter.layout`)."""
+
+from __future__ import annotations
+
+import math
+
+import numpy as np
+from numpy.typing import NDArray
+
+from estimator.filter.compiled import kernel
+from estimator.filter.gnss import gnss_update
+from estimator.filter.layout import (
+    A_COV_T,
+    A_DIST,
+    A_DR,
+    A_GNSS_USED,
+    A_GYRO_N,
+    A_GYRO_SUM,
+    A_INFLATE,
+    A_LAST_AID,
+    A_NEXT_OUT,
+    A_PREV_ACCEL,
+    A_PREV_GYRO,
+    A_TIME,
+    C_AID_DT,
+    C_COV_DT,
+    C_GRAVITY,
+    C_OUT_DT,
+    C_TAU_W,
+    C_WHEEL_GAP,
+    C_WIE,
+    E_ATT,
+    E_POS,
+    E_VEL,
+    I_GNSS,
+    I_IMU,
+    I_OUT,
+    I_WHEEL,
+    NE,
+    NX,
+    O_DIST,
+    O_DR,
+    O_GNSS,
+    O_POS,
+    O_RPY,
+    O_SIG_POS,
+    O_SIG_YAW,
+    O_T,
+    O_VEL,
+    STATUS_DIVERGED,
+    STATUS_DONE,
+    STATUS_FULL,
+    X_POS,
+    X_QUAT,
+    X_VEL,
+)
+from estimator.filter.mechanisation import mechanise
+from estimator.filter.propagation import accumulate, flush_into
+from estimator.filter.quaternion import dcm_to_euler, quat_to_dcm
+from estimator.filter.updates import body_velocity_update, zupt_update
+
+F64 = NDArray[np.float64]
+I64 = NDArray[np.int64]
+
+IMU_GAP_S = 5.0
+"""An IMU interval longer than this (a logging gap) is not integrated: rates held for minutes
+turn the attitude into noise. The state is carried across unchanged and the next fix widens
+the position covariance to cover wherever the vehicle went meanwhile."""
+GAP_VEL_VAR = 5.0**2
+GAP_YAW_VAR = (math.pi / 4) ** 2
+"""Velocity and yaw variance added across a logging gap: the vehicle may have turned."""
+ZUPT_MAX_SPEED = 1.0
+"""m/s: a stop is only believed when the filter has slowed down to it (a vehicle cruising on a
+smooth road at constant speed looks as still to the IMU as a parked one)."""
+
+
+@kernel
+def write_row(x: F64, P: F64, aux: F64, idx: I64, out: F64) -> None:
+    """Write the current state as an output row; a row at the same time as the previous one
+    replaces it (a match attempt at a regular output instant)."""
+    r = idx[I_OUT]
+    used = aux[A_GNSS_USED]
+    if r > 0 and out[r - 1, O_T] == aux[A_TIME]:
+        r -= 1
+        used = max(used, out[r, O_GNSS])
+    else:
+        idx[I_OUT] = r + 1
+    C = np.empty((3, 3))
+    quat_to_dcm(x[X_QUAT : X_QUAT + 4], C)
+    roll, pitch, yaw = dcm_to_euler(C)
+    out[r, O_T] = aux[A_TIME]
+    for i in range(3):
+        out[r, O_POS + i] = x[X_POS + i]
+        out[r, O_VEL + i] = x[X_VEL + i]
+        out[r, O_SIG_POS + i] = math.sqrt(max(P[E_POS + i, E_POS + i], 0.0))
+    out[r, O_RPY] = roll
+    out[r, O_RPY + 1] = pitch
+    out[r, O_RPY + 2] = yaw
+    out[r, O_SIG_YAW] = math.sqrt(max(P[E_ATT + 2, E_ATT + 2], 0.0))
+    out[r, O_GNSS] = used
+    out[r, O_DR] = aux[A_DR]
+    out[r, O_DR + 1] = aux[A_DR + 1]
+    out[r, O_DIST] = aux[A_DIST]
+    aux[A_GNSS_USED] = 0.0
+
+
+@kernel
+def finite_state(x: F64, P: F64) -> bool:
+    """Whether the state and the covariance diagonal are finite (one sum: NaN and inf spread)."""
+    acc = 0.0
+    for i in range(NX):
+        acc += x[i]
+    for i in range(NE):
+        acc += P[i, i]
+    return math.isfinite(acc)
+
+
+@kernel
+def run_until(
+    t_stop: float,
+    x: F64,
+    P: F64,
+    aux: F64,
+    idx: I64,
+    imu_t: F64,
+    gyro: F64,
+    accel: F64,
+    still: NDArray[np.bool_],
+    wheel_t: F64,
+    wheel_v: F64,
+    gnss_t: F64,
+    gnss_pos: F64,
+    gnss_var: F64,
+    cfg: F64,
+    out: F64,
+) -> int:
+    """Process IMU samples (and the measurements up to each of them) while their time is
+    <= ``t_stop``. Returns STATUS_DONE, STATUS_FULL (``out`` has no room: grow it and call
+    again) or STATUS_DIVERGED. Stopping and resuming does not change any result."""
+    n = imu_t.shape[0]
+    nw = wheel_t.shape[0]
+    ng = gnss_t.shape[0]
+    C = np.empty((3, 3))
+    H = np.zeros((3, NE))
+    R = np.zeros((3, 3))
+    y = np.zeros(3)
+    PHt = np.empty((NE, 3))
+    S = np.empty((3, 3))
+    Si = np.empty((3, 3))
+    FA = np.empty((NE, NE))
+    FB = np.empty((NE, NE))
+    FC = np.empty((3, 3))
+    FF = np.empty(3)
+    w = cfg[C_WIE : C_WIE + 3]
+    grav = cfg[C_GRAVITY]
+    itw = 1.0 / cfg[C_TAU_W]
+    while idx[I_IMU] < n:
+        k = idx[I_IMU]
+        t = imu_t[k]
+        if t > t_stop:
+            return STATUS_DONE
+        if idx[I_OUT] >= out.shape[0] - 2:
+            return STATUS_FULL
+        dt = _interval(P, aux, t)
+        # --- strapdown, and the pending covariance propagation
+        fn0, fn1, fn2 = mechanise(x, aux, gyro, accel, k, dt, w, grav, itw, C)
+        accumulate(aux, C, fn0, fn1, fn2, dt)
+        if aux[A_COV_T] >= cfg[C_COV_DT]:
+            flush_into(P, aux, cfg, FA, FB, FC, FF)
+        _hold_sample(aux, t, gyro, accel, k)
+        # --- wheel speed / NHC / ZUPT at the aid rate
+        while idx[I_WHEEL] < nw and wheel_t[idx[I_WHEEL]] <= t:
+            idx[I_WHEEL] += 1
+        _gather_still_gyro(aux, gyro, k, still[k])
+        if t - aux[A_LAST_AID] >= cfg[C_AID_DT] - 1e-9:
+            aux[A_LAST_AID] = t
+            flush_into(P, aux, cfg, FA, FB, FC, FF)
+            speed2 = x[X_VEL] * x[X_VEL] + x[X_VEL + 1] * x[X_VEL + 1] + x[X_VEL + 2] * x[X_VEL + 2]
+            if still[k] and speed2 < ZUPT_MAX_SPEED * ZUPT_MAX_SPEED:
+                zupt_update(x, P, aux, cfg, H, y, R, PHt, S, Si)
+            else:
+                have, ws = _wheel_speed(t, idx[I_WHEEL], wheel_t, wheel_v, cfg[C_WHEEL_GAP])
+                body_velocity_update(x, P, cfg, ws, have, C, H, y, R, PHt, S, Si)
+        # --- GNSS
+        while idx[I_GNSS] < ng and gnss_t[idx[I_GNSS]] <= t:
+            g = idx[I_GNSS]
+            idx[I_GNSS] += 1
+            flush_into(P, aux, cfg, FA, FB, FC, FF)
+            used = gnss_update(
+                x, P, aux, cfg, t, gnss_t[g], gnss_pos[g], gnss_var[g], C, H, y, R, PHt, S, Si
+            )
+            if used:
+                aux[A_GNSS_USED] = 1.0
+        idx[I_IMU] = k + 1
+        if t >= aux[A_NEXT_OUT]:
+            if not finite_state(x, P):
+                return STATUS_DIVERGED
+            write_row(x, P, aux, idx, out)
+            while aux[A_NEXT_OUT] <= t:
+                aux[A_NEXT_OUT] += cfg[C_OUT_DT]
+    return STATUS_DONE
+
+
+@kernel
+def _interval(P: F64, aux: F64, t: float) -> float:
+    """The time since the state's sample, or 0 across a logging gap (:data:`IMU_GAP_S`), whose
+    uncertainty goes into the covariance and the next fix's widening instead."""
+    dt: float = t - aux[A_TIME]
+    if dt > IMU_GAP_S:
+        dt = 0.0
+        aux[A_INFLATE] = 1.0
+        for i in range(3):
+            P[E_VEL + i, E_VEL + i] += GAP_VEL_VAR
+        P[E_ATT + 2, E_ATT + 2] += GAP_YAW_VAR
+    return dt
+
+
+@kernel
+def _hold_sample(aux: F64, t: float, gyro: F64, accel: F64, k: int) -> None:
+    """Make sample ``k`` the state's time and the previous sample of the next interval."""
+    aux[A_TIME] = t
+    aux[A_PREV_GYRO], aux[A_PREV_GYRO + 1], aux[A_PREV_GYRO + 2] = (
+        gyro[k, 0],
+        gyro[k, 1],
+        gyro[k, 2],
+    )
+    aux[A_PREV_ACCEL], aux[A_PREV_ACCEL + 1], aux[A_PREV_ACCEL + 2] = (
+        accel[k, 0],
+        accel[k, 1],
+        accel[k, 2],
+    )
+
+
+@kernel
+def _gather_still_gyro(aux: F64, gyro: F64, k: int, still: bool) -> None:
+    """Sum the gyro over the current stationary stretch (the ZUPT's bias observation)."""
+    if still:
+        for i in range(3):
+            aux[A_GYRO_SUM + i] += gyro[k, i]
+        aux[A_GYRO_N] += 1
+    else:
+        aux[A_GYRO_N] = 0.0
+        for i in range(3):
+            aux[A_GYRO_SUM + i] = 0.0
+
+
+@kernel
+def _wheel_speed(
+    t: float, j: int, wheel_t: F64, wheel_v: F64, max_gap: float
+) -> tuple[bool, float]:
+    """(available, speed) at ``t`` from the wheel samples around it (``j``: the first after
+    ``t``): interpolated between samples at most ``max_gap`` apart, or the last sample held
+    for half that after the stream ends."""
+    nw = wheel_t.shape[0]
+    have = j > 0 and j < nw and wheel_t[j] - wheel_t[j - 1] <= max_gap
+    ws = 0.0
+    if have:
+        f = (t - wheel_t[j - 1]) / (wheel_t[j] - wheel_t[j - 1])
+        ws = wheel_v[j - 1] + f * (wheel_v[j] - wheel_v[j - 1])
+    elif j > 0 and j == nw and t - wheel_t[j - 1] <= 0.5 * max_gap:
+        have = True
+        ws = wheel_v[j - 1]
+    return have, ws

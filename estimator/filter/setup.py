@@ -1,0 +1,305 @@
+"""What the compiled filter reads, made from a log: sensor arrays repaired and on one clock (IMU
+in the body frame, GNSS in the session's ENU frame, injected outages removed), per-sample
+stationarity, the run's constants packed for the kernel, the aligned initial state, and the
+GNSS-degraded intervals where the route matcher steps in."""
+
+from __future__ import annotations
+
+import math
+from dataclasses import dataclass
+
+import numpy as np
+from numpy.typing import NDArray
+
+from estimator.errors import LogError
+from estimator.filter.alignment import DEG_H, MG, align
+from estimator.filter.layout import (
+    A_DR,
+    A_LAST_AID,
+    A_NEXT_OUT,
+    A_PREV_ACCEL,
+    A_PREV_GYRO,
+    A_REJECT_SINCE,
+    A_TIME,
+    A_TRUST_T,
+    C_AID_DT,
+    C_ARW2,
+    C_COV_DT,
+    C_GNSS_GATE,
+    C_GRAVITY,
+    C_LEVER,
+    C_NHC_VAR,
+    C_OUT_DT,
+    C_QBA,
+    C_QBG,
+    C_QW_H,
+    C_QW_V,
+    C_RESET_S,
+    C_ROBUST,
+    C_SCALE_ON,
+    C_TAU_A,
+    C_TAU_G,
+    C_TAU_W,
+    C_VRW2,
+    C_WHEEL_GAP,
+    C_WHEEL_VAR,
+    C_WHITE_VAR,
+    C_WIE,
+    C_ZUPT_VAR,
+    E_GW,
+    E_POS,
+    I_GNSS,
+    I_IMU,
+    I_WHEEL,
+    NA,
+    NC,
+    NI,
+)
+from estimator.filter.moving_mean import moving_mean
+from estimator.log import Log
+from estimator.nav.earth import earth_rate_n, normal_gravity
+from estimator.nav.frames import LocalFrame
+from estimator.nav.rotation import dcm_from_euler
+from estimator.params import Params, SensorParams
+
+F64 = NDArray[np.float64]
+Outages = tuple[tuple[float, float], ...]
+
+
+@dataclass(frozen=True)
+class FilterInputs:
+    """What the kernel reads: sensor arrays on the IMU clock, in the body frame and the local
+    ENU frame, plus the initial state. Depends on the log, the outages and the filter
+    parameters only."""
+
+    imu_t: F64
+    gyro: F64
+    accel: F64
+    still: NDArray[np.bool_]
+    wheel_t: F64
+    wheel_v: F64
+    gnss_t: F64
+    gnss_pos: F64
+    gnss_var: F64
+    cfg: F64
+    x0: F64
+    P0: F64
+    aux0: F64
+    idx0: NDArray[np.int64]
+    degraded: tuple[tuple[float, float], ...]
+    warnings: tuple[str, ...]
+
+
+def prepare_inputs(log: Log, p: Params, frame: LocalFrame, outages: Outages) -> FilterInputs:
+    """The kernel's inputs for one log: ``outages`` are (start, end) seconds after the log start
+    where GNSS is removed; ``p`` is already resolved for the method (:func:`for_method`)."""
+    src = log.path
+    warnings: list[str] = []
+    s = p.sensors
+    imu_t, gyro, accel = _imu_arrays(log, s, warnings)
+    wheel_t, wheel_v = _wheel_arrays(log, s, warnings)
+    gnss_t, gnss_pos, gnss_var = _gnss_arrays(log, p, frame, outages)
+    n = p.noise
+    h_floor = n.gnss_sigma_floor_m**2
+    still = stationary(imu_t, gyro, accel, wheel_t, wheel_v, p)
+    cfg = kernel_config(p, frame, wheel_t)
+    # the wander follows the log's typical fix; each fix keeps the rest as white noise
+    wander = n.gnss_wander_fraction * np.median(gnss_var, axis=0)
+    wander[:2] = wander[:2].mean()
+    gnss_var = np.ascontiguousarray(np.maximum(gnss_var - wander, [h_floor, h_floor, 4 * h_floor]))
+    cfg[C_TAU_W] = n.gnss_wander_tau_s
+    cfg[C_WHITE_VAR] = float(np.median(gnss_var[:, :2]))
+    cfg[C_QW_H] = 2 * wander[0] / n.gnss_wander_tau_s
+    cfg[C_QW_V] = 2 * wander[2] / n.gnss_wander_tau_s
+    x0, P0, k0, t_fix = align(
+        src, imu_t, gyro, accel, still, wheel_t, wheel_v, gnss_t, gnss_pos, gnss_var, p, cfg
+    )
+    # the aligning fix measures position + wander: their errors start anti-correlated
+    for i in range(3):
+        a, b = E_POS + i, E_GW + i
+        P0[a, a] += wander[i]
+        P0[b, b] = wander[i]
+        P0[a, b] = P0[b, a] = -wander[i]
+    aux0 = _initial_aux(x0, float(imu_t[k0]), t_fix, gyro[k0], accel[k0])
+    idx0 = np.zeros(NI, np.int64)
+    idx0[I_IMU] = k0 + 1
+    idx0[I_WHEEL] = np.searchsorted(wheel_t, float(imu_t[k0]), side="right")
+    idx0[I_GNSS] = np.searchsorted(gnss_t, t_fix, side="right")
+    degraded = degraded_intervals(gnss_t, t_fix, float(imu_t[-1]), s.gnss_gap_s)
+    return FilterInputs(
+        imu_t=imu_t,
+        gyro=gyro,
+        accel=accel,
+        still=still,
+        wheel_t=wheel_t,
+        wheel_v=wheel_v,
+        gnss_t=gnss_t,
+        gnss_pos=gnss_pos,
+        gnss_var=gnss_var,
+        cfg=cfg,
+        x0=x0,
+        P0=P0,
+        aux0=aux0,
+        idx0=idx0,
+        degraded=degraded,
+        warnings=tuple(warnings),
+    )
+
+
+def _imu_arrays(log: Log, s: SensorParams, warnings: list[str]) -> tuple[F64, F64, F64]:
+    """IMU time, gyro and accel: non-finite samples dropped, time sorted without repeats, and
+    rotated from the IMU's mounting into the body frame."""
+    src = log.path
+    imu_t = np.asarray(log.imu.t, np.float64)
+    gyro = np.asarray(log.imu.gyro, np.float64).reshape(-1, 3)
+    accel = np.asarray(log.imu.accel, np.float64).reshape(-1, 3)
+    if not (len(imu_t) == len(gyro) == len(accel)):
+        raise LogError(src, "IMU time, gyro and accel arrays differ in length")
+    ok = np.isfinite(imu_t) & np.all(np.isfinite(gyro), 1) & np.all(np.isfinite(accel), 1)
+    if (~ok).any():
+        warnings.append(f"dropped {int((~ok).sum())} non-finite IMU samples")
+        imu_t, gyro, accel = imu_t[ok], gyro[ok], accel[ok]
+    if len(imu_t) and np.any(np.diff(imu_t) <= 0):
+        order = np.argsort(imu_t, kind="stable")
+        imu_t, gyro, accel = imu_t[order], gyro[order], accel[order]
+        keep = np.r_[True, np.diff(imu_t) > 0]
+        warnings.append(f"IMU time not increasing: sorted, dropped {int((~keep).sum())} repeats")
+        imu_t, gyro, accel = imu_t[keep], gyro[keep], accel[keep]
+    if len(imu_t) < 10:
+        raise LogError(src, f"only {len(imu_t)} usable IMU samples; the filter needs a stream")
+    big = np.diff(imu_t) > 1.0
+    if big.any():
+        warnings.append(
+            f"{int(big.sum())} IMU gaps longer than 1 s (largest "
+            f"{float(np.max(np.diff(imu_t))):.1f} s)"
+        )
+    r_bi = dcm_from_euler(
+        math.radians(s.imu_roll_deg), math.radians(s.imu_pitch_deg), math.radians(s.imu_yaw_deg)
+    ).reshape(3, 3)
+    if not np.allclose(r_bi, np.eye(3)):
+        gyro = gyro @ r_bi.T
+        accel = accel @ r_bi.T
+    return imu_t, np.ascontiguousarray(gyro), np.ascontiguousarray(accel)
+
+
+def _wheel_arrays(log: Log, s: SensorParams, warnings: list[str]) -> tuple[F64, F64]:
+    """Wheel speed on the IMU clock, finite and sorted; empty when there are fewer than two."""
+    wheel_t = np.empty(0)
+    wheel_v = np.empty(0)
+    if log.wheel is not None and len(log.wheel.t):
+        wt = np.asarray(log.wheel.t, np.float64) + s.wheel_time_offset_s
+        wv = np.asarray(log.wheel.speed, np.float64)
+        good = np.isfinite(wt) & np.isfinite(wv)
+        order = np.argsort(wt[good], kind="stable")
+        wheel_t, wheel_v = wt[good][order], wv[good][order]
+    if len(wheel_t) < 2:
+        warnings.append("no wheel speed: IMU + GNSS with non-holonomic constraints")
+        wheel_t, wheel_v = np.empty(0), np.empty(0)
+    return wheel_t, wheel_v
+
+
+def _gnss_arrays(log: Log, p: Params, frame: LocalFrame, outages: Outages) -> tuple[F64, F64, F64]:
+    """GNSS fixes: valid, not in an injected outage, in the local frame, sorted, with floored
+    variances (a default where the receiver reports none)."""
+    s = p.sensors
+    g = log.gnss
+    valid = np.asarray(g.valid, bool).copy()
+    rel = np.asarray(g.t, np.float64) - log.t_start
+    for a, b in outages:
+        valid &= ~((rel >= a) & (rel <= b))
+    gt = np.asarray(g.t, np.float64)[valid] + s.gnss_time_offset_s
+    enu = frame.to_enu(g.lat[valid], g.lon[valid], g.alt[valid])
+    cov = np.asarray(g.cov_enu, np.float64).reshape(-1, 3)[valid]
+    n = p.noise
+    h_def, h_floor = n.gnss_sigma_default_m**2, n.gnss_sigma_floor_m**2
+    var = np.empty_like(cov)
+    for i, (d, f) in enumerate(((h_def, h_floor), (h_def, h_floor), (4 * h_def, 4 * h_floor))):
+        c = cov[:, i]
+        var[:, i] = np.maximum(np.where(np.isfinite(c) & (c > 0), c, d), f)
+    good = np.all(np.isfinite(enu), 1) & np.isfinite(gt)
+    order = np.argsort(gt[good], kind="stable")
+    gnss_t = gt[good][order]
+    gnss_pos = np.ascontiguousarray(enu[good][order])
+    gnss_var = np.ascontiguousarray(var[good][order])
+    if len(gnss_t) == 0:
+        raise LogError(log.path, "no valid GNSS fix outside the outages: the filter cannot start")
+    return gnss_t, gnss_pos, gnss_var
+
+
+def _initial_aux(x0: F64, t_init: float, t_fix: float, gyro0: F64, accel0: F64) -> F64:
+    aux0 = np.zeros(NA)
+    aux0[A_TIME] = t_init
+    aux0[A_LAST_AID] = t_init
+    aux0[A_NEXT_OUT] = t_init
+    aux0[A_REJECT_SINCE] = -1.0
+    aux0[A_DR : A_DR + 2] = x0[:2]
+    aux0[A_TRUST_T] = t_fix
+    aux0[A_PREV_GYRO : A_PREV_GYRO + 3] = gyro0
+    aux0[A_PREV_ACCEL : A_PREV_ACCEL + 3] = accel0
+    return aux0
+
+
+def kernel_config(p: Params, frame: LocalFrame, wheel_t: F64) -> F64:
+    """The run's constants as the kernel reads them (``cfg``; the GNSS wander's are added by
+    :func:`prepare_inputs`, which knows the log's typical fix)."""
+    n = p.noise
+    cfg = np.zeros(NC)
+    cfg[C_COV_DT] = n.propagation_interval_s
+    cfg[C_ARW2] = (math.radians(n.gyro_arw_deg_sqrt_h) / 60) ** 2
+    cfg[C_VRW2] = (n.accel_vrw_m_s_sqrt_h / 60) ** 2
+    cfg[C_TAU_G] = n.gyro_bias_tau_s
+    cfg[C_QBG] = 2 * (n.gyro_bias_sigma_deg_h * DEG_H) ** 2 / n.gyro_bias_tau_s
+    cfg[C_TAU_A] = n.accel_bias_tau_s
+    cfg[C_QBA] = 2 * (n.accel_bias_sigma_mg * MG) ** 2 / n.accel_bias_tau_s
+    cfg[C_WHEEL_VAR] = n.wheel_speed_sigma_m_s**2
+    cfg[C_NHC_VAR] = n.nhc_sigma_m_s**2
+    cfg[C_ZUPT_VAR] = n.zupt_sigma_m_s**2
+    cfg[C_GNSS_GATE] = n.gnss_chi2_gate
+    cfg[C_LEVER : C_LEVER + 3] = p.sensors.gnss_lever_arm_m
+    cfg[C_GRAVITY] = normal_gravity(frame.lat0, frame.h0)
+    cfg[C_WIE : C_WIE + 3] = earth_rate_n(frame.lat0)
+    cfg[C_OUT_DT] = 1.0 / p.output_rate_hz
+    cfg[C_AID_DT] = 1.0 / n.aid_rate_hz
+    cfg[C_SCALE_ON] = float(p.extensions.wheel_scale_state and len(wheel_t) > 0)
+    cfg[C_RESET_S] = n.gnss_reset_after_s
+    cfg[C_ROBUST] = float(p.extensions.robust_gnss)
+    gap = float(np.median(np.diff(wheel_t))) if len(wheel_t) > 1 else 0.0
+    cfg[C_WHEEL_GAP] = max(0.5, 5 * gap)
+    return cfg
+
+
+def stationary(
+    imu_t: F64, gyro: F64, accel: F64, wheel_t: F64, wheel_v: F64, p: Params
+) -> NDArray[np.bool_]:
+    """Per IMU sample: the vehicle is stopped. With wheel speed: the wheels say so and the
+    gyro, averaged over 0.5 s, is quiet; without: the gyro is quiet and |accel| barely varies."""
+    n = p.noise
+    dt = float(np.median(np.diff(imu_t)))
+    m = max(3, round(0.5 / max(dt, 1e-4)))
+    g_mean = moving_mean(gyro, m)
+    quiet = np.linalg.norm(g_mean, axis=1) < math.radians(n.zupt_gyro_deg_s)
+    with np.errstate(over="ignore", invalid="ignore"):
+        a = np.linalg.norm(accel, axis=1)
+        a_var = moving_mean(a * a, m) - moving_mean(a, m) ** 2
+        imu_still: NDArray[np.bool_] = quiet & (
+            np.sqrt(np.maximum(a_var, 0)) < n.zupt_accel_std_m_s2
+        )
+    if len(wheel_t) < 2:
+        return imu_still
+    j = np.clip(np.searchsorted(wheel_t, imu_t), 1, len(wheel_t) - 1)
+    gap = wheel_t[j] - wheel_t[j - 1]
+    covered = (imu_t >= wheel_t[0] - 0.5) & (imu_t <= wheel_t[-1] + 0.5) & (gap <= 1.0)
+    ws = np.interp(imu_t, wheel_t, np.abs(wheel_v))
+    still: NDArray[np.bool_] = np.where(covered, (ws < n.zupt_speed_m_s) & quiet, imu_still)
+    return still
+
+
+def degraded_intervals(
+    gnss_t: F64, t_start: float, t_end: float, gap_s: float
+) -> tuple[tuple[float, float], ...]:
+    """Stretches after ``t_start`` with no valid fix for longer than ``gap_s``: (last fix,
+    next fix), or (last fix, log end)."""
+    ft = gnss_t[(gnss_t >= t_start) & (gnss_t <= t_end)]
+    edges = np.r_[ft, t_end]
+    d = np.diff(edges)
+    return tuple((float(edges[i]), float(edges[i + 1])) for i in np.flatnonzero(d > gap_s))

@@ -1,0 +1,161 @@
+"""The decode cache: a decoded :class:`Log` saved as ``.npz``, keyed by a hash of the log's bytes,
+the topic choice and :data:`CACHE_VERSION`, so the second load of a log is near-instant."""
+
+from __future__ import annotations
+
+import contextlib
+import dataclasses
+import hashlib
+import json
+import os
+import tempfile
+from collections.abc import Callable
+from pathlib import Path
+from typing import Any
+
+import numpy as np
+
+from estimator.io.topics import TopicChoice
+from estimator.log import GnssData, ImuData, Log, TopicInfo, TruthData, WheelData
+
+CACHE_VERSION = 4
+CACHE_MAX_BYTES = 2_000_000_000
+"""Least recently used cache entries are removed beyond this total size."""
+
+
+def default_cache_dir() -> Path:
+    """``$ROUTEFUSE_CACHE_DIR``, else ``$XDG_CACHE_HOME/routefuse``, else ``~/.cache/routefuse``."""
+    if env := os.environ.get("ROUTEFUSE_CACHE_DIR"):
+        return Path(env)
+    if xdg := os.environ.get("XDG_CACHE_HOME"):
+        return Path(xdg) / "routefuse"
+    return Path.home() / ".cache" / "routefuse"
+
+
+def cached_log(
+    path: Path,
+    source: Path,
+    topics: TopicChoice,
+    *,
+    cache_dir: Path | None,
+    read: Callable[[], Log],
+) -> Log:
+    """The log from the cache when ``source`` was decoded before with these topics, else
+    ``read()`` saved into the cache. ``path`` is what the user named (``Log.path``)."""
+    cache = cache_dir if cache_dir is not None else default_cache_dir()
+    key = hashlib.sha256(
+        json.dumps(
+            [_content_hash(source, cache), dataclasses.astuple(topics), CACHE_VERSION]
+        ).encode()
+    ).hexdigest()[:40]
+    entry = cache / f"log-{key}.npz"
+    if entry.is_file():
+        try:
+            with np.load(entry, allow_pickle=False) as data:
+                log = _from_npz(path, data)
+            with contextlib.suppress(OSError):
+                os.utime(entry)  # recently used: pruned last
+            return log
+        except (OSError, ValueError, KeyError, TypeError):
+            pass
+    log = read()
+    _save(entry, log)
+    return log
+
+
+def _files_of(path: Path) -> list[Path]:
+    return sorted(p for p in path.rglob("*") if p.is_file()) if path.is_dir() else [path]
+
+
+def _content_hash(path: Path, cache: Path | None) -> str:
+    """sha256 of the log's bytes; a (path, size, mtime) memo in the cache skips re-hashing."""
+    files = _files_of(path)
+    stat_key = hashlib.sha256(
+        json.dumps(
+            [[str(f.resolve()), f.stat().st_size, f.stat().st_mtime_ns] for f in files]
+        ).encode()
+    ).hexdigest()[:32]
+    memo = cache / f"stat-{stat_key}.txt" if cache is not None else None
+    if memo is not None and memo.is_file():
+        text = memo.read_text().strip()
+        if len(text) == 64:
+            return text
+    h = hashlib.sha256()
+    for f in files:
+        h.update(str(f.relative_to(path) if path.is_dir() else "").encode())
+        with f.open("rb") as fh:
+            while chunk := fh.read(1 << 20):
+                h.update(chunk)
+    digest = h.hexdigest()
+    if memo is not None:
+        _atomic_write(memo, digest.encode())
+    return digest
+
+
+def _atomic_write(target: Path, data: bytes) -> None:
+    with contextlib.suppress(OSError):
+        target.parent.mkdir(parents=True, exist_ok=True)
+        fd, tmp = tempfile.mkstemp(dir=target.parent, prefix=".tmp-")
+        with os.fdopen(fd, "wb") as fh:
+            fh.write(data)
+        os.replace(tmp, target)
+
+
+def _to_npz(log: Log) -> dict[str, Any]:
+    arrays: dict[str, Any] = {}
+    for name in ("imu", "gnss", "wheel", "truth"):
+        part = getattr(log, name)
+        if part is not None:
+            for f in dataclasses.fields(part):
+                arrays[f"{name}.{f.name}"] = getattr(part, f.name)
+    meta = {"topics": [dataclasses.asdict(t) for t in log.topics], "warnings": list(log.warnings)}
+    arrays["meta"] = np.array(json.dumps(meta))
+    return arrays
+
+
+def _from_npz(path: Path, data: Any) -> Log:
+    def part(name: str, cls: type) -> Any:
+        keys = [f.name for f in dataclasses.fields(cls)]
+        if f"{name}.{keys[0]}" not in data:
+            return None
+        return cls(**{k: data[f"{name}.{k}"] for k in keys})
+
+    meta = json.loads(str(data["meta"]))
+    return Log(
+        str(path),
+        part("imu", ImuData),
+        part("gnss", GnssData),
+        part("wheel", WheelData),
+        part("truth", TruthData),
+        tuple(TopicInfo(**t) for t in meta["topics"]),
+        tuple(meta["warnings"]),
+    )
+
+
+def _save(target: Path, log: Log) -> None:
+    with contextlib.suppress(OSError):
+        target.parent.mkdir(parents=True, exist_ok=True)
+        fd, tmp = tempfile.mkstemp(dir=target.parent, prefix=".tmp-", suffix=".npz")
+        with os.fdopen(fd, "wb") as fh:
+            np.savez(fh, **_to_npz(log))
+        os.replace(tmp, target)
+        prune(target.parent, keep=target)
+
+
+def prune(cache: Path, *, keep: Path, max_bytes: int | None = None) -> None:
+    """Remove the least recently used entries until the cache fits in ``max_bytes``
+    (default :data:`CACHE_MAX_BYTES`)."""
+    limit = CACHE_MAX_BYTES if max_bytes is None else max_bytes
+    entries = []
+    for p in cache.glob("log-*.npz"):
+        with contextlib.suppress(OSError):
+            st = p.stat()
+            entries.append((st.st_mtime, st.st_size, p))
+    total = sum(size for _, size, _ in entries)
+    for _, size, p in sorted(entries):
+        if total <= limit:
+            break
+        if p != keep:
+            with contextlib.suppress(OSError):
+                p.unlink()
+                total -= size

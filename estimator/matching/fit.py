@@ -1,0 +1,251 @@
+"""THE rigid fit: a window registered to one road (the candidate or a rival).
+
+The window's pairs are placed along the road where the along-track search puts them
+(:func:`~estimator.matching.kernels.along_track_pairs`), registered with a proper rigid 2-D
+transform (Kabsch), and the current DR position mapped by it, moved by the lane offset, is the
+pseudo-position; its covariance follows the road's direction. The candidate and the rivals go
+through the same code, so a change to the fit is made once. The Kabsch step is numpy's: the
+filter's results were made with its roundings (a match the filter is updated with feeds later
+windows, and the along-track search amplifies a 1e-16 change into 1e-8 m over an outage).
+"""
+
+from __future__ import annotations
+
+import functools
+from dataclasses import dataclass
+
+import numpy as np
+from numpy.typing import ArrayLike, NDArray
+
+from estimator.matching.geometry import Polyline
+from estimator.matching.kernels import along_track_pairs, rms_residual
+from estimator.params import Params
+
+F64 = NDArray[np.float64]
+
+
+@dataclass(frozen=True)
+class FitSettings:
+    """The parameters the fit depends on, read once per parameter set."""
+
+    spacing_m: float
+    along_search: bool
+    """``extensions.along_track_search``: scan the pairs' start along the road"""
+    geometry_covariance: bool
+    """``extensions.geometry_covariance``: the covariance follows the road's direction"""
+    step_m: float
+    deltas: F64
+    """along-track offsets the scan tries, m"""
+    shape_noise_m: float
+    along_sigma_max_m: float
+    along_sigma_min_m: float
+    cross_sigma_m: float
+    cross_residual_factor: float
+    sigma_m: float
+    """isotropic 1-sigma without ``geometry_covariance``"""
+
+    @classmethod
+    def of(cls, params: Params) -> FitSettings:
+        return _settings(params)
+
+
+@functools.lru_cache(maxsize=64)
+def _settings(params: Params) -> FitSettings:
+    ext, w, po = params.extensions, params.window, params.pseudo
+    step = w.along_search_step_m
+    if ext.along_track_search:
+        k_half = max(int(np.ceil(w.along_search_m / step)), 1)
+        deltas = step * np.arange(-k_half, k_half + 1, dtype=np.float64)
+    elif ext.geometry_covariance:
+        deltas = np.array([-step, 0.0, step])
+    else:
+        deltas = np.zeros(1)
+    deltas.setflags(write=False)
+    return FitSettings(
+        spacing_m=w.spacing_m,
+        along_search=ext.along_track_search,
+        geometry_covariance=ext.geometry_covariance,
+        step_m=step,
+        deltas=deltas,
+        shape_noise_m=po.shape_noise_m,
+        along_sigma_max_m=po.along_sigma_max_m,
+        along_sigma_min_m=po.along_sigma_min_m,
+        cross_sigma_m=po.cross_sigma_m,
+        cross_residual_factor=po.cross_residual_factor,
+        sigma_m=po.sigma_m,
+    )
+
+
+@dataclass(frozen=True)
+class Fit:
+    """A window registered to one road."""
+
+    s_first: float
+    """arc length (on the road) of the first pair"""
+    valid: NDArray[np.bool_]
+    route_points: F64
+    rotation: F64
+    translation: F64
+    residual: float
+    n_pairs: int
+    heading_cos: float
+    along_offset: float
+    along_curvature: float
+    along_sigma: float
+    along_observed: bool
+    p_ref: F64
+    s_ref: float
+    tangent: F64
+    normal: F64
+    z: F64
+    obs_cov: F64
+
+    @property
+    def angle(self) -> float:
+        return float(np.arctan2(self.rotation[1, 0], self.rotation[0, 0]))
+
+
+def fit_window(
+    win: F64,
+    p_dr: F64,
+    road: Polyline,
+    s_anchor: float,
+    lane_offset: float,
+    settings: FitSettings,
+    *,
+    pointwise_residual: bool = False,
+) -> Fit | None:
+    """Register the window (resampled, (N, 2)) to ``road``, its first point at about arc
+    length ``s_anchor``; the pseudo-position is moved ``lane_offset`` to the left of the road.
+    None when fewer than 2 pairs fall on the road.
+
+    ``pointwise_residual``: the residual summed pair by pair
+    (:func:`~estimator.matching.kernels.rms_residual`), exact to the last digits a table
+    prints, instead of from the Kabsch sums, whose rounding the candidate's results (its
+    covariance, the filter) were made with; the rivals, scored only, use it."""
+    n = len(win)
+    s = np.empty(n)
+    valid = np.empty(n, np.bool_)
+    q = np.empty((n, 2))
+    offset, curvature, sigma, observed = along_track_pairs(
+        win,
+        road.xy,
+        road.s,
+        road.unit,
+        float(s_anchor),
+        settings.deltas,
+        settings.along_search,
+        settings.step_m,
+        settings.spacing_m,
+        settings.shape_noise_m,
+        settings.along_sigma_max_m,
+        settings.along_sigma_min_m,
+        s,
+        valid,
+        q,
+    )
+    idx = np.flatnonzero(valid)
+    n_pairs = len(idx)
+    if n_pairs < 2:
+        return None
+    rot, trans, ms = _kabsch(win, q, valid.astype(np.float64))
+    residual = rms_residual(win, q, valid, rot) if pointwise_residual else float(np.sqrt(ms))
+    i1, i0 = idx[-1], idx[-2]
+    d_s = win[i1] - win[i0]
+    d_t = q[i1] - q[i0]
+    norm = float(np.hypot(*d_s) * np.hypot(*d_t))
+    heading_cos = float(np.dot(d_s, d_t) / norm) if norm > 0 else -1.0
+
+    p_ref = rot @ p_dr + trans
+    s_end = float(s[i1])
+    s_ref = s_end + float((p_ref - q[i1]) @ road.tangent(s_end))
+    tangent = road.tangent(s_ref)
+    normal = np.array([-tangent[1], tangent[0]])
+    z = p_ref + lane_offset * normal
+    return Fit(
+        s_first=float(s[idx[0]]),
+        valid=valid,
+        route_points=q,
+        rotation=rot,
+        translation=trans,
+        residual=residual,
+        n_pairs=n_pairs,
+        heading_cos=heading_cos,
+        along_offset=float(offset),
+        along_curvature=float(curvature),
+        along_sigma=float(sigma),
+        along_observed=bool(observed),
+        p_ref=p_ref,
+        s_ref=s_ref,
+        tangent=tangent,
+        normal=normal,
+        z=z,
+        obs_cov=_observation_cov(tangent, normal, sigma, residual, settings),
+    )
+
+
+def _observation_cov(
+    tangent: F64, normal: F64, along_sigma: float, residual: float, settings: FitSettings
+) -> F64:
+    """R_k: along-track as the search observed it, cross-track from the registration
+    residual (``geometry_covariance``); else isotropic."""
+    if settings.geometry_covariance:
+        cross = max(settings.cross_sigma_m, settings.cross_residual_factor * residual)
+        basis = np.column_stack([tangent, normal])
+        cov: F64 = basis @ np.diag([along_sigma**2, cross**2]) @ basis.T
+        return cov
+    return settings.sigma_m**2 * np.eye(2)
+
+
+def fit_cost(fit: Fit, p_dr: F64, pos_cov2: F64, settings: FitSettings) -> float:
+    """How badly a road explains the window: innovation chi-square plus fit quality."""
+    nu = fit.z - p_dr
+    return mahalanobis2(nu, pos_cov2 + fit.obs_cov) + (fit.residual / settings.shape_noise_m) ** 2
+
+
+def mahalanobis2(nu: F64, cov: F64) -> float:
+    """nu^T cov^-1 nu of a 2-vector (inf when cov is singular); the 2x2 inverse written out,
+    which is np.linalg.solve's result to rounding at a fraction of its call overhead."""
+    a, b = float(cov[0, 0]), float(cov[0, 1])
+    c, d = float(cov[1, 0]), float(cov[1, 1])
+    det = a * d - b * c
+    if det == 0.0:
+        return float("inf")
+    n0, n1 = float(nu[0]), float(nu[1])
+    return (n0 * (d * n0 - b * n1) + n1 * (a * n1 - c * n0)) / det
+
+
+def kabsch_2d(src: ArrayLike, dst: ArrayLike, weights: ArrayLike | None = None) -> tuple[F64, F64]:
+    """The proper rotation R (2, 2) and translation t (2,) minimising
+    sum w_i |R src_i + t - dst_i|^2 over (n, 2) point sets.
+
+    SVD of the cross-covariance C = U S V^T, R = V diag(1, det(V U^T)) U^T: the guard refuses
+    reflections, so a mirrored shape is fitted by the best rotation, with its residual."""
+    s = np.asarray(src, np.float64)
+    d = np.asarray(dst, np.float64)
+    w = np.ones(len(d)) if weights is None else np.asarray(weights, np.float64)
+    rot, trans, _ = _kabsch(s, d, w)
+    return rot, trans
+
+
+def _kabsch(src: F64, dst: F64, w: F64) -> tuple[F64, F64, float]:
+    """Weighted Kabsch of one (n, 2) pair of point sets: R, t and the weighted mean squared
+    residual (from sum w |R a - b|^2 = sum w |a|^2 + sum w |b|^2 - 2 tr(R C))."""
+    wsum = max(float(w.sum()), 1e-300)
+    w2 = w[:, None]
+    cs = (w2 * src).sum(axis=0) / wsum
+    ct = (w2 * dst).sum(axis=0) / wsum
+    a = src - cs
+    b = dst - ct
+    aw = w2 * a
+    cov = aw.T @ b
+    u, _, vt = np.linalg.svd(cov)
+    v = vt.T.copy()
+    r = v @ u.T
+    if r[0, 0] * r[1, 1] - r[0, 1] * r[1, 0] < 0.0:
+        v[:, 1] *= -1.0
+        r = v @ u.T
+    trans = ct - r @ cs
+    sq = float((aw * a).sum() + (w2 * b * b).sum())
+    tr = float(np.einsum("ij,ji->", r, cov))
+    return r, trans, max(sq - 2.0 * tr, 0.0) / wsum

@@ -1,0 +1,422 @@
+"""Drive the EKF over a log and, in GNSS-degraded intervals, the route matcher.
+
+The compiled loop runs from one stop time to the next; the driver steps in only at the start of
+each degraded interval and at each match attempt, where it saves a checkpoint (for re-run
+reuse, :mod:`estimator.pipeline.reuse`), builds the DR window, matches it
+(:func:`estimator.matching.match_geometry`, then
+:func:`~estimator.matching.judge_match`) and, if the match is accepted, applies the route
+update (:mod:`estimator.filter.route_update`).
+
+When GNSS returns after pseudo-position updates, the first fix widens the E/N position variance
+just enough to cover its own innovation (:func:`estimator.filter.gnss.widen_position`) before it
+is tested: the route observations are correlated with each other and with the DR drift, so the
+filter's position covariance after them is optimistic, and without the widening the chi-square
+gate would reject the returning fixes for seconds and then let one through as a late, large
+jump. Attitude, velocity and biases keep their covariances, so the returning fix corrects them
+through the cross-covariances exactly as in normal fusion.
+"""
+
+from __future__ import annotations
+
+import dataclasses
+import math
+from collections.abc import Callable, Sequence
+from dataclasses import dataclass
+from typing import Literal
+
+import numpy as np
+from numpy.typing import NDArray
+
+from estimator.errors import LogError, RoutefuseError
+from estimator.filter.engine import Filter, epochs_of
+from estimator.filter.kernel import finite_state
+from estimator.filter.layout import (
+    A_DIST,
+    A_DR,
+    A_NEXT_OUT,
+    A_TIME,
+    C_OUT_DT,
+    I_IMU,
+    O_DIST,
+    O_DR,
+    O_GNSS,
+    O_POS,
+    O_T,
+)
+from estimator.filter.portal import advance_to_outage
+from estimator.filter.propagation import flush_covariance
+from estimator.filter.route_update import apply_route_match
+from estimator.filter.setup import FilterInputs, prepare_inputs
+from estimator.filter.updates import clone_lane_offset
+from estimator.log import Log
+from estimator.matching.kernels import max_turn_deg, search_right, track_window
+from estimator.matching import (
+    MatchGeometry,
+    geometry_params,
+    judge_match,
+    learn_lane_offset,
+    match_geometry,
+    route_arc_length,
+)
+from estimator.nav.frames import LocalFrame
+from estimator.params import Method, Params, for_method
+from estimator.pipeline.reuse import (
+    Checkpoint,
+    Memo,
+    ReuseState,
+    filter_key,
+    log_key,
+    resume,
+    reusable_state,
+)
+from estimator.results import Epochs, LongWindow, MatchRecord, Run
+from estimator.route import Route
+
+F64 = NDArray[np.float64]
+ProgressFn = Callable[[float], None]
+
+
+def run(
+    log: Log,
+    route: Route | None,
+    params: Params,
+    *,
+    method: Method = "proposed",
+    frame: LocalFrame | None = None,
+    outages: Sequence[tuple[float, float]] = (),
+    progress: ProgressFn | None = None,
+    reuse: Run | None = None,
+) -> Run:
+    """Run one method over a log.
+
+    ``outages``: (start, end) seconds after the log start where GNSS is removed. ``frame``: the
+    session's local frame (default: at the log's first valid fix). ``progress``: called with the
+    fraction done. ``reuse``: a previous run on the same log, route and outages; if only matching
+    parameters differ, the filter resumes from the first match attempt whose outcome changes.
+    """
+    p = for_method(params, method)
+    matching = method != "baseline"
+    if matching and route is None:
+        raise RoutefuseError(None, f"method {method!r} needs a route")
+    outages_t = tuple((float(a), float(b)) for a, b in outages)
+    for a, b in outages_t:
+        if not (math.isfinite(a) and math.isfinite(b)) or b <= a:
+            raise RoutefuseError(None, f"outage {a:g}:{b:g}: END must be after START")
+    if frame is None:
+        frame = _frame_of(log)
+    key = filter_key(p)
+    old = reusable_state(reuse, log, route, frame, outages_t, key)
+    inputs = old.inputs if old is not None else prepare_inputs(log, p, frame, outages_t)
+    memo = Memo(None if old is None else old.memo)
+    driver = Driver(log, route, p, matching, inputs, progress, memo)
+    if old is not None and reuse is not None:
+        resume(driver, old, reuse.params, reuse_matching=reuse.method != "baseline")
+    else:
+        driver.start()
+    # a baseline after a baseline is the previous run: share its (immutable) epochs, so what
+    # was computed from them can be recognised (metrics.deviation_series)
+    epochs = reuse.epochs if driver.copied_whole_run and reuse is not None else driver.epochs()
+    if progress is not None:
+        progress(1.0)
+    state = ReuseState(
+        log=log_key(log),
+        route=route,
+        frame=frame,
+        outages=outages_t,
+        filter_key=key,
+        inputs=inputs,
+        out=driver.filt.out,
+        n_out=driver.filt.n_out,
+        checkpoints=tuple(driver.checkpoints),
+        records=tuple(driver.records),
+        memo=driver.memo.own,
+        dropped_fixes=tuple(driver.dropped_fixes),
+    )
+    return Run(
+        method=method,
+        params=p,
+        frame=frame,
+        epochs=epochs,
+        matches=tuple(driver.records),
+        degraded_intervals=inputs.degraded,
+        t0=log.t_start,
+        dropped_fix_times=tuple(driver.dropped_fixes),
+        warnings=tuple(log.warnings)
+        + inputs.warnings
+        + (route.warnings if route is not None else ()),
+        _reuse=state,
+    )
+
+
+def _frame_of(log: Log) -> LocalFrame:
+    ok = log.gnss.valid
+    if not ok.any():
+        raise LogError(log.path, "no valid GNSS fix: the filter cannot be initialised")
+    return LocalFrame.at(log.gnss.lat[ok], log.gnss.lon[ok], log.gnss.alt[ok])
+
+
+@dataclass
+class _Track:
+    """Where on the route the vehicle is, and the lane offset of the current interval."""
+
+    lane: float = 0.0
+    s: float | None = None
+    s_dist: float = 0.0
+
+
+class Driver:
+    """One run's estimation loop: the filter between stops, the route part at the stops."""
+
+    def __init__(
+        self,
+        log: Log,
+        route: Route | None,
+        p: Params,
+        matching: bool,
+        inputs: FilterInputs,
+        progress: ProgressFn | None,
+        memo: Memo,
+    ) -> None:
+        self.log = log
+        self._route = route
+        self.p = p
+        self.matching = matching
+        self.inp = inputs
+        self.filt = Filter(inputs, source=log.path, t_start=log.t_start, progress=progress)
+        self.memo = memo
+        self.checkpoints: list[Checkpoint] = []
+        self.records: list[MatchRecord] = []
+        self.track = _Track()
+        self.dropped_fixes: list[float] = []
+        """times of the fixes the fixed-lag re-runs left out"""
+        self.copied_whole_run = False
+        """the run is the reused one (a baseline after a baseline)"""
+
+    @property
+    def route(self) -> Route:
+        if self._route is None:
+            raise RoutefuseError(None, "matching needs a route")
+        return self._route
+
+    def start(self) -> None:
+        f = self.filt
+        f.set_state((self.inp.x0, self.inp.P0, self.inp.aux0, self.inp.idx0))
+        f.alloc(self._rows_needed())
+        f.write_row()
+        f.aux[A_NEXT_OUT] = f.aux[A_TIME] + self.inp.cfg[C_OUT_DT]
+        self.loop(0, None)
+
+    def _rows_needed(self) -> int:
+        inp = self.inp
+        span = float(inp.imu_t[-1] - inp.imu_t[inp.idx0[I_IMU] - 1])
+        n = int(span * self.p.output_rate_hz) + 16
+        if self.matching:
+            tr = self.p.trigger
+            n += sum(int((b - a) / tr.interval_s) + 2 for a, b in inp.degraded)
+        return n
+
+    def loop(self, i0: int, at: Checkpoint | None) -> None:
+        """Run live from the start of interval ``i0``, or from the attempt checkpoint ``at``
+        (whose attempt is redone)."""
+        tr = self.p.trigger
+        spacing = self.p.window.spacing_m
+        f = self.filt
+        for i in range(i0, len(self.inp.degraded)):
+            a, b = self.inp.degraded[i]
+            if at is not None and i == at.interval:
+                k, dist_a, dist_last = at.k, at.dist_a, at.dist_last
+            else:
+                self.dropped_fixes.extend(advance_to_outage(f, a, self.p))
+                dist_a = float(f.aux[A_DIST])
+                dist_last = -math.inf
+                k = 0
+                self._checkpoint("outage", i, 0, dist_a, dist_last)
+                if not self.matching:
+                    continue
+                self.begin_interval(a, f.out, f.n_out, f.x, f.aux)
+                if self.p.extensions.lane_offset_state and self.track.s is not None:
+                    t = self.route.tangent_at(self.track.s)[0]
+                    clone_lane_offset(f.P, f.aux, self.inp.cfg, np.array([-t[1], t[0]]))
+            while True:
+                t_try = a + tr.min_outage_s + k * tr.interval_s
+                if t_try >= b or t_try > self.inp.imu_t[-1]:
+                    break
+                redo = at is not None and i == at.interval and k == at.k
+                if not redo:
+                    f.advance(t_try)
+                d = float(f.aux[A_DIST])
+                if d - dist_a >= tr.min_outage_distance_m and d - dist_last >= spacing:
+                    if not redo:
+                        self._checkpoint("attempt", i, k, dist_a, dist_last)
+                    self._attempt_live()
+                    dist_last = d
+                k += 1
+            at = None
+        f.advance(math.inf)
+
+    def _checkpoint(
+        self,
+        kind: Literal["outage", "attempt"],
+        interval: int,
+        k: int,
+        dist_a: float,
+        dist_last: float,
+    ) -> None:
+        self.checkpoints.append(
+            Checkpoint(
+                kind=kind,
+                interval=interval,
+                k=k,
+                state=self.filt.snapshot(),
+                n_records=len(self.records),
+                dist_a=dist_a,
+                dist_last=dist_last,
+            )
+        )
+
+    def _predicted_s(self, aux: F64) -> float | None:
+        tr = self.track
+        return None if tr.s is None else tr.s + (aux[A_DIST] - tr.s_dist)
+
+    def begin_interval(self, t_a: float, out: F64, n_out: int, x: F64, aux: F64) -> None:
+        """Place the vehicle on the route and learn the lane offset at an interval's start."""
+        rows = out[:n_out]
+        tr = self.track
+        tr.s = route_arc_length(self.route, x[:2], s_guess=self._predicted_s(aux), params=self.p)
+        tr.s_dist = float(aux[A_DIST])
+        used = rows[:, O_GNSS] > 0
+        # the offset is learned around the last epoch a fix was used in, which may lie well
+        # before t_a (fixes rejected or left out at the portal): a search window centred on
+        # the vehicle would clip the older epochs onto its end, with metres of false offset
+        last = np.flatnonzero(used & (rows[:, O_T] <= t_a))
+        s_last = tr.s
+        if len(last):
+            s_last = tr.s - (float(aux[A_DIST]) - float(rows[last[-1], O_DIST]))
+        tr.lane = learn_lane_offset(
+            rows[:, O_T],
+            rows[:, O_POS : O_POS + 2],
+            used,
+            self.route,
+            t_end=t_a,
+            params=self.p,
+            s_guess=s_last,
+        )
+
+    def _window(self, out: F64, n_out: int, x: F64, aux: F64, length_m: float) -> F64:
+        """The DR track over the last ``length_m`` of travel, integrated from the mechanised
+        velocity only (no correction jumps), translated to end at the estimate."""
+        dist = out[:n_out, O_DIST]
+        d_now = float(aux[A_DIST])
+        i0 = max(search_right(dist, d_now - length_m) - 1, 0)
+        window: F64 = track_window(
+            out[:n_out, O_DR : O_DR + 2],
+            dist,
+            aux[A_DR : A_DR + 2],
+            d_now,
+            i0,
+            x[:2] - aux[A_DR : A_DR + 2],
+        )
+        return window
+
+    def match(self, out: F64, n_out: int, x: F64, P: F64, aux: F64) -> MatchRecord:
+        """One attempt's match (P must be propagated to the attempt time).
+
+        A bend much gentler than the window (an expressway's 12 deg over 500 m) has no shape
+        inside a 250 m window: sliding along an arc is a rotation, which the rigid fit absorbs,
+        so along-track stays unobserved however long the tunnel. Seen whole in a longer window
+        the bend is a corner, whose place along the road the fit finds. The longer window only
+        replaces an accepted standard match that left along-track unobserved, only where the
+        road is gentle (no standard-length stretch of it turns more than
+        ``window.long_max_turn_deg``: sharper bends the standard window observes itself, and
+        over a long window they make the fit depend on how well the map's arc length matches
+        the lane's), and only if it passes every gate itself (``extensions.long_window``)."""
+        pred = self._predicted_s(aux)
+        w = self.p.window
+
+        def attempt(window_xy: F64, params: Params) -> MatchRecord:
+            geometry = self._geometry(window_xy, x[:2].copy(), P[6:8, 6:8].copy(), pred, params)
+            return judge_match(
+                geometry, params, index=len(self.records), t=float(aux[A_TIME]), epoch=n_out
+            )
+
+        rec = attempt(self._window(out, n_out, x, aux, w.length_m), self.p)
+        if not (
+            self.p.extensions.long_window
+            and w.long_length_m > w.length_m
+            and rec.accepted
+            and not rec.along_observed
+        ):
+            return rec
+        long_xy = self._window(out, n_out, x, aux, w.long_length_m)
+        turn = self.memo.get(
+            ("turn", w.length_m, w.spacing_m),
+            (long_xy,),
+            lambda: max_turn(long_xy, w.length_m, w.spacing_m),
+        )
+        if turn > w.long_max_turn_deg:
+            return rec
+        # map and DR shape errors are correlated over tens of metres: the long window's points
+        # count as many as the standard window's, not as independent extra information
+        po = self.p.pseudo
+        noise = po.shape_noise_m * math.sqrt(w.long_length_m / w.length_m)
+        long = attempt(
+            long_xy,
+            dataclasses.replace(self.p, pseudo=dataclasses.replace(po, shape_noise_m=noise)),
+        )
+        if not (long.accepted and long.along_observed):
+            return rec
+        return dataclasses.replace(long, long_window=LongWindow(turn, rec.window_length_m))
+
+    def _geometry(
+        self, window_xy: F64, p_dr: F64, cov: F64, pred: float | None, params: Params
+    ) -> MatchGeometry:
+        """:func:`match_geometry` of an attempt, or the previous run's for the same inputs
+        (window, position, covariance, route guess, lane offset and the parameters the geometry
+        depends on): after a gate change the attempts before the first changed outcome are only
+        re-judged, not fitted again."""
+        lane = self.track.lane
+        return self.memo.get(
+            ("geometry", pred, lane, geometry_params(params)),
+            (window_xy, p_dr, cov),
+            lambda: match_geometry(
+                window_xy, p_dr, cov, self.route, s_guess=pred, lane_offset=lane, params=params
+            ),
+        )
+
+    def after_match(self, rec: MatchRecord, x_after: F64, aux: F64) -> None:
+        """Follow the vehicle along the route after an accepted match."""
+        if rec.accepted:
+            tr = self.track
+            pred = self._predicted_s(aux)
+            tr.s = route_arc_length(self.route, x_after[:2], s_guess=pred, params=self.p)
+            tr.s_dist = float(aux[A_DIST])
+
+    def _attempt_live(self) -> None:
+        f = self.filt
+        flush_covariance(f.P, f.aux, self.inp.cfg)
+        n_out = f.n_out
+        rec = self.match(f.out, n_out, f.x, f.P, f.aux)
+        innovation, correction = rec.innovation, np.zeros(2)
+        if rec.accepted:
+            innovation, correction, rec = apply_route_match(f, rec, self.p)
+            if not finite_state(f.x, f.P):
+                raise LogError(
+                    self.log.path,
+                    "the filter diverged (non-finite state) after "
+                    f"the route update at t = {rec.t - self.log.t_start:.2f} s",
+                )
+        epoch = f.write_row()
+        rec = dataclasses.replace(rec, epoch=epoch, innovation=innovation, correction=correction)
+        self.records.append(rec)
+        self.after_match(rec, f.x, f.aux)
+
+    def epochs(self) -> Epochs:
+        return epochs_of(self.filt.out, self.filt.n_out, self.inp.degraded)
+
+
+def max_turn(xy: F64, stretch_m: float, spacing_m: float) -> float:
+    """The largest heading change over any ``stretch_m`` of a polyline, in degrees (the
+    polyline resampled every ``spacing_m`` from its end; compiled:
+    :func:`estimator.matching.kernels.max_turn_deg`)."""
+    pts = np.ascontiguousarray(np.asarray(xy, np.float64)[:, :2])
+    return float(max_turn_deg(pts, float(stretch_m), float(spacing_m)))

@@ -1,0 +1,250 @@
+"""Re-run reuse (a UI speed feature): a run keeps checkpoints of the filter at every stop, and
+the match geometries it computed by their inputs, so a later run on the same log, route and
+outages with other matching parameters resumes from the first checkpoint whose outcome
+changes instead of from the log start. The attempts before it are only re-judged (the
+previous run's geometries are kept by their inputs, and a gate threshold does not change
+them), and a baseline after a baseline is the previous run.
+
+None of this is public: it travels in :class:`estimator.results.Run`'s private ``_reuse``."""
+
+from __future__ import annotations
+
+import dataclasses
+import hashlib
+from collections.abc import Callable, Hashable
+from dataclasses import dataclass, field
+from typing import TYPE_CHECKING, Literal, TypeVar, cast
+
+import numpy as np
+from numpy.typing import NDArray
+
+from estimator.filter.engine import FilterState
+from estimator.filter.layout import A_TIME, I_OUT, O_POS
+from estimator.filter.propagation import flush_covariance
+from estimator.filter.setup import FilterInputs
+from estimator.log import Log
+from estimator.nav.frames import LocalFrame
+from estimator.params import Params
+from estimator.results import MatchRecord, Run
+from estimator.route import Route
+
+if TYPE_CHECKING:
+    from estimator.pipeline.driver import Driver
+
+F64 = NDArray[np.float64]
+T = TypeVar("T")
+Key = tuple[Hashable, ...]
+
+
+@dataclass(frozen=True)
+class Checkpoint:
+    """The filter at a stop, before anything the driver does there."""
+
+    kind: Literal["outage", "attempt"]
+    """the start of a degraded interval, or a match attempt"""
+    interval: int
+    k: int
+    """attempt counter inside the interval: t = a + min_outage_s + k * interval_s"""
+    state: FilterState
+    n_records: int
+    dist_a: float
+    dist_last: float
+
+    @property
+    def n_out(self) -> int:
+        return int(self.state[3][I_OUT])
+
+
+class Memo:
+    """Values computed from arrays (match geometries, long-window turns) by their inputs: this
+    run's, and the previous run's when this one reuses it."""
+
+    def __init__(self, known: dict[Key, object] | None = None) -> None:
+        self.known: dict[Key, object] = known if known is not None else {}
+        self.own: dict[Key, object] = {}
+
+    def get(self, key: Key, arrays: tuple[F64, ...], compute: Callable[[], T]) -> T:
+        """``compute()``, or the value this run or the previous one computed for the same key
+        and array contents."""
+        digest = hashlib.blake2b(digest_size=16)
+        for a in arrays:
+            a = np.ascontiguousarray(a, np.float64)
+            digest.update(repr(a.shape).encode())
+            digest.update(a.tobytes())
+        full = (*key, digest.digest())
+        value = self.known.get(full, self.own.get(full))
+        if value is None:
+            value = compute()
+        self.own[full] = value
+        return cast(T, value)
+
+
+@dataclass(frozen=True)
+class ReuseState:
+    """What a later run needs to resume from this one."""
+
+    log: Key
+    """fingerprint of the log (:func:`log_key`); a Run stays picklable"""
+    route: Route | None
+    frame: LocalFrame
+    outages: tuple[tuple[float, float], ...]
+    filter_key: Key
+    inputs: FilterInputs
+    out: F64
+    n_out: int
+    checkpoints: tuple[Checkpoint, ...]
+    records: tuple[MatchRecord, ...]
+    memo: dict[Key, object] = field(default_factory=dict)
+    dropped_fixes: tuple[float, ...] = ()
+
+
+def log_key(log: Log) -> Key:
+    """Identifies a log's content cheaply: sizes, spans and sums over a sample of values."""
+    imu, g = log.imu, log.gnss
+    step = max(1, len(imu.t) // 4096)
+    wheel = () if log.wheel is None else (len(log.wheel.t), float(np.nansum(log.wheel.speed)))
+    return (
+        log.path,
+        len(imu.t),
+        float(imu.t[0]) if len(imu.t) else 0.0,
+        float(imu.t[-1]) if len(imu.t) else 0.0,
+        float(np.nansum(imu.gyro[::step])),
+        float(np.nansum(imu.accel[::step])),
+        len(g.t),
+        float(np.nansum(g.lat)),
+        float(np.nansum(g.lon)),
+        wheel,
+    )
+
+
+def filter_key(p: Params) -> Key:
+    """Everything the filter itself (not the matcher) depends on."""
+    ext = p.extensions
+    return (
+        p.noise,
+        p.sensors,
+        ext.wheel_scale_state,
+        ext.robust_gnss,
+        ext.portal_rerun,
+        p.output_rate_hz,
+    )
+
+
+def reusable_state(
+    reuse: Run | None,
+    log: Log,
+    route: Route | None,
+    frame: LocalFrame,
+    outages: tuple[tuple[float, float], ...],
+    key: Key,
+) -> ReuseState | None:
+    """``reuse``'s state if it was run on the same log, frame, outages, route and filter."""
+    old = reuse._reuse if reuse is not None else None
+    if old is None:
+        return None
+    same = (
+        old.log == log_key(log)
+        and old.frame == frame
+        and old.outages == outages
+        and old.filter_key == key
+        and (
+            route is None
+            or old.route is route
+            or (old.route is not None and np.array_equal(old.route.xy, route.xy))
+        )
+    )
+    return old if same else None
+
+
+def same_outcome(new: MatchRecord, old: MatchRecord) -> bool:
+    """Whether a re-evaluated attempt leaves the filter exactly as the old one did."""
+    if new.accepted != old.accepted:
+        return False
+    if not new.accepted:
+        return True
+    return bool(
+        np.array_equal(new.pseudo_position, old.pseudo_position)
+        and np.array_equal(new.obs_cov, old.obs_cov)
+        and new.rotation_rad == old.rotation_rad
+        and new.n_pairs == old.n_pairs
+        and new.residual_m == old.residual_m
+    )
+
+
+def resume(d: Driver, old: ReuseState, old_params: Params, *, reuse_matching: bool) -> None:
+    """Replay the old run's checkpoints with ``d``'s matching parameters until one gives a
+    different outcome, then run live from there."""
+    p = d.p
+    d.filt.out = old.out
+    outage_cps = [c for c in old.checkpoints if c.kind == "outage"]
+    same_trigger = (
+        p.trigger == old_params.trigger
+        and p.extensions.heading_observation == old_params.extensions.heading_observation
+        and p.extensions.lane_offset_state == old_params.extensions.lane_offset_state
+    )
+    if not d.matching and not reuse_matching:
+        # baseline after baseline: the filter and its inputs are the same, so is the run
+        _copy_old(d, old, len(old.checkpoints), old.n_out)
+        d.copied_whole_run = True
+        return
+    if not d.matching or not reuse_matching or not same_trigger:
+        if not outage_cps:
+            _copy_old(d, old, len(old.checkpoints), old.n_out)
+            return
+        first = outage_cps[0]
+        _restart(d, old, first, old.checkpoints.index(first), [])
+        d.loop(first.interval, None)
+        return
+    _replay_attempts(d, old)
+
+
+def _replay_attempts(d: Driver, old: ReuseState) -> None:
+    """Re-judge the old attempts in order; at the first changed outcome run live from it."""
+    records: list[MatchRecord] = []
+    for n_cp, cp in enumerate(old.checkpoints):
+        x, P0, aux0, _ = cp.state
+        if cp.kind == "outage":
+            a = d.inp.degraded[cp.interval][0]
+            d.begin_interval(a, old.out, cp.n_out, x, aux0)
+            continue
+        P = P0.copy()
+        aux = aux0.copy()
+        flush_covariance(P, aux, d.inp.cfg)
+        d.records = records
+        rec = d.match(old.out, cp.n_out, x, P, aux)
+        prev = old.records[cp.n_records]
+        if not same_outcome(rec, prev):
+            _restart(d, old, cp, n_cp + 1, records)
+            d.loop(cp.interval, cp)
+            return
+        rec = dataclasses.replace(
+            rec,
+            epoch=prev.epoch,
+            innovation=prev.innovation,
+            correction=prev.correction,
+            heading_observation=prev.heading_observation,
+        )
+        records.append(rec)
+        x_after = old.out[prev.epoch, O_POS : O_POS + 3]
+        d.after_match(rec, x_after, aux)
+    _copy_old(d, old, len(old.checkpoints), old.n_out)
+    d.records = records
+
+
+def _copy_old(d: Driver, old: ReuseState, n_checkpoints: int, n_out: int) -> None:
+    d.dropped_fixes = list(old.dropped_fixes)
+    d.filt.out = old.out
+    d.checkpoints = list(old.checkpoints[:n_checkpoints])
+    d.records = []
+    d.filt.idx = np.zeros_like(d.filt.idx)
+    d.filt.idx[I_OUT] = n_out
+
+
+def _restart(
+    d: Driver, old: ReuseState, cp: Checkpoint, n_keep: int, records: list[MatchRecord]
+) -> None:
+    d.checkpoints = list(old.checkpoints[:n_keep])
+    d.records = list(records)
+    d.dropped_fixes = [t for t in old.dropped_fixes if t <= cp.state[2][A_TIME]]
+    d.filt.set_state(cp.state)
+    d.filt.out = old.out.copy()

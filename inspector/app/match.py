@@ -1,0 +1,111 @@
+"""The Match tab: the attempt shown at the playhead, every gate with its verdict, then the fit."""
+
+from __future__ import annotations
+
+from typing import Any
+
+import numpy as np
+import viser
+
+from estimator.results import GateDecision, MatchRecord
+from inspector.controller import Session
+
+
+def _fmt(v: Any, digits: int = 3) -> str:
+    try:
+        f = float(v)
+    except (TypeError, ValueError):
+        return str(v)
+    if not np.isfinite(f):
+        return "–"
+    return f"{f:.{digits}f}" if abs(f) < 1e5 else f"{f:.3g}"
+
+
+def _gate_value(g: GateDecision) -> str:
+    return "no rival" if g.no_rival else _fmt(g.value)
+
+
+def _vec(v: Any, digits: int = 2) -> str:
+    a = np.asarray(v, np.float64).reshape(-1)
+    if a.size == 0 or not np.all(np.isfinite(a)):
+        return "–"
+    return "(" + ", ".join(f"{x:.{digits}f}" for x in a) + ")"
+
+
+def match_markdown(
+    m: MatchRecord | None, *, t_rel: float | None = None, age_s: float = 0.0, total: int = 0
+) -> str:
+    """The match panel: every gate with value, threshold and verdict, then the fit."""
+    if m is None:
+        return "*No match attempt before this time.*"
+    head = "ACCEPTED" if m.accepted else "REJECTED"
+    when = f" at t = {t_rel:.2f} s" if t_rel is not None else ""
+    age = f" ({age_s:.2f} s ago)" if age_s > 0.005 else ""
+    lines = [
+        f"**Attempt #{m.index} of {total}{when}{age}: {head}**",
+        "",
+        "| gate | value | limit | verdict |",
+        "|---|---:|---:|---|",
+    ]
+    notes = []
+    for g in m.gates:
+        verdict = "✓ passed" if g.passed else "✗ **FAILED**"
+        lines.append(
+            f"| {g.name} | {_gate_value(g)} | {g.comparison} {_fmt(g.threshold)} | {verdict} |"
+        )
+        if g.note:
+            notes.append(f"*{g.name}*: {g.note}")
+    corr = np.asarray(m.correction, np.float64).reshape(-1)
+    corr_norm = float(np.hypot(*corr)) if corr.size == 2 and np.all(np.isfinite(corr)) else np.nan
+    cov = np.asarray(m.obs_cov, np.float64)
+    sig = np.sqrt(np.clip(np.diag(cov), 0, None)) if cov.shape == (2, 2) else np.full(2, np.nan)
+    lines += [
+        "",
+        "| fit | |",
+        "|---|---:|",
+        f"| rotation | {_fmt(np.degrees(m.rotation_rad))} deg |",
+        f"| translation E, N | {_vec(m.translation)} m |",
+        f"| residual (RMS) | {_fmt(m.residual_m)} m |",
+        f"| pairs | {m.n_pairs} |",
+        f"| heading cos | {_fmt(m.heading_cos, 4)} |",
+        f"| route arc length | {_fmt(m.route_s[0], 1)} – {_fmt(m.route_s[1], 1)} m |",
+        f"| lane offset | {_fmt(m.lane_offset_m, 2)} m |",
+        f"| p_dr → z | {_vec(m.p_dr)} → {_vec(m.pseudo_position)} |",
+        f"| innovation E, N | {_vec(m.innovation)} m |",
+        f"| correction E, N | {_vec(m.correction)} m (\\|c\\| = {_fmt(corr_norm, 2)} m) |",
+        f"| obs. 1-sigma E, N | {_vec(sig)} m |",
+    ]
+    lines += [f"| {k} | {_fmt(v)} |" for k, v in sorted(m.diagnostics().items())]
+    if notes:
+        lines += ["", "<small>" + "; ".join(notes) + "</small>"]
+    return "\n".join(lines)
+
+
+class MatchPanel:
+    """The markdown of the attempt at the playhead, redrawn only when that attempt (or the
+    off-route note above it) changes."""
+
+    def __init__(self, gui: viser.GuiApi) -> None:
+        self.markdown = gui.add_markdown(match_markdown(None))
+        self.shown: tuple[int, int | None, str] | None = None
+
+    def forget(self) -> None:
+        """Redraw at the next :meth:`show` (a new session)."""
+        self.shown = None
+
+    def show(self, s: Session, t: float) -> None:
+        tl = s.timeline
+        i = tl.match_at(t)
+        off_head = s.off_route.panel_text(t, i) if s.off_route is not None else ""
+        key = (s.version, i, off_head)
+        if key == self.shown:
+            return
+        self.shown = key
+        m = s.proposed.matches[i] if i is not None else None
+        panel = match_markdown(
+            m,
+            t_rel=None if i is None else float(tl.match_t[i]),
+            age_s=0.0 if i is None else t - float(tl.match_t[i]),
+            total=len(tl.match_t),
+        )
+        self.markdown.content = f"{off_head}\n\n{panel}" if off_head else panel

@@ -1,0 +1,200 @@
+"""The Parameters tab: the method, the injected GNSS outages, and one widget per declared
+parameter (grouped as :func:`estimator.params.param_specs` declares them)."""
+
+from __future__ import annotations
+
+import threading
+from collections.abc import Callable
+from functools import partial
+from typing import TYPE_CHECKING, Any
+
+import viser
+
+from estimator.errors import RoutefuseError
+from estimator.params import ParamSpec, get_param, param_specs, params_to_toml
+from inspector.app.widgets import Event, show_value
+from inspector.controller import ProposedMethod, format_outages, parse_outages
+
+if TYPE_CHECKING:
+    from inspector.app.view import ClientView
+
+PROPOSED_METHODS: tuple[ProposedMethod, ...] = ("proposed", "paper")
+"""the methods the 'method' dropdown offers (each compared with the baseline)"""
+GROUP_TITLES = {
+    "trigger": "trigger",
+    "window": "window",
+    "gates": "gates",
+    "pseudo": "pseudo-observation",
+    "offset": "offset compensation",
+    "extensions": "extensions",
+    "noise": "noise",
+    "sensors": "sensors",
+    "general": "general",
+}
+OUTAGE_LABEL = "GNSS outages (s)"
+OUTAGE_EDIT_QUIET_S = 1.0
+"""the outage field applies its text once typing has rested this long: viser sends every
+keystroke, and '3', '30', '30:' on the way to '30:60' are not outages the user meant"""
+
+
+def param_widget(gui: viser.GuiApi, spec: ParamSpec, value: Any) -> viser.GuiInputHandle[Any]:
+    """The widget a parameter's declaration calls for: checkbox, dropdown, vector, slider,
+    number or text."""
+    label = spec.name.rsplit(".", 1)[-1]
+    hint = spec.doc + (f" [{spec.unit}]" if spec.unit else "")
+    if spec.type is bool:
+        return gui.add_checkbox(label, bool(value), hint=hint)
+    if spec.choices:
+        return gui.add_dropdown(label, spec.choices, initial_value=value, hint=hint)
+    if str(spec.type).startswith("tuple"):
+        return gui.add_vector3(label, tuple(value), step=0.01, hint=hint)
+    if spec.type in (int, float) and spec.lo is not None and spec.hi is not None:
+        step = spec.step or (1 if spec.type is int else (spec.hi - spec.lo) / 100)
+        if (spec.hi - spec.lo) / step <= 2000:
+            if spec.type is int:
+                return gui.add_slider(
+                    label, int(spec.lo), int(spec.hi), int(step), int(value), hint=hint
+                )
+            return gui.add_slider(
+                label, float(spec.lo), float(spec.hi), float(step), float(value), hint=hint
+            )
+        return gui.add_number(label, value, min=spec.lo, max=spec.hi, step=step, hint=hint)
+    return gui.add_text(label, "" if value is None else str(value), hint=hint)
+
+
+class ParametersPanel:
+    """Edits the controller's shared parameters; shows them again when another tab, or a
+    failed run, changed them."""
+
+    def __init__(self, view: ClientView, gui: viser.GuiApi, *, lock: threading.RLock) -> None:
+        self.view = view
+        self._lock = lock
+        self.client = view.client
+        self.controller = view.app.controller
+        self._widgets: dict[str, viser.GuiInputHandle[Any]] = {}
+        self._outage_edits = 0
+        self._outage_timer: threading.Timer | None = None
+        self.method = gui.add_dropdown(
+            "method", PROPOSED_METHODS, initial_value=self.controller.method
+        )
+        self.method.on_update(self._on_method)
+        self.outage_field = gui.add_text(
+            OUTAGE_LABEL,
+            format_outages(self.controller.outages),
+            hint="remove GNSS between START and END seconds after the log start, as "
+            "'routefuse run --outage START:END': e.g. 30:60, 90:120 (empty: none). "
+            "Applied when you stop typing; opening another log clears them.",
+        )
+        self.outage_field.on_update(self._on_outages)
+        reset = gui.add_button("reset to defaults")
+        reset.on_click(lambda e: view.guard(self.controller.reset_params))
+        save = gui.add_button("save parameters")
+        save.on_click(self._on_save)
+        self._add_widgets(gui)
+
+    def _add_widgets(self, gui: viser.GuiApi) -> None:
+        groups: dict[str, list[ParamSpec]] = {}
+        for spec in param_specs():
+            groups.setdefault(spec.group, []).append(spec)
+        params = self.controller.params
+        for group, specs in groups.items():
+            with gui.add_folder(
+                GROUP_TITLES.get(group, group),
+                expand_by_default=group in ("trigger", "window", "gates"),
+            ):
+                for spec in specs:
+                    widget = param_widget(gui, spec, get_param(params, spec.name))
+                    widget.on_update(self._param_setter(spec.name))
+                    self._widgets[spec.name] = widget
+
+    def _param_setter(self, name: str) -> Callable[[Event], None]:
+        def set_value(event: Event) -> None:
+            if event.client is None:
+                return
+            widget = self._widgets[name]
+            self.view.guard(lambda: self.controller.set_param(name, widget.value))
+
+        return set_value
+
+    def _on_method(self, event: Event) -> None:
+        if event.client is None:
+            return
+        chosen = self.method.value
+        for method in PROPOSED_METHODS:
+            if method == chosen:
+                self.view.guard(partial(self.controller.set_method, method))
+
+    def _on_outages(self, event: Event) -> None:
+        """Restart the quiet-period timer: the text is applied once the typing rests."""
+        if event.client is None:
+            return
+        with self._lock:
+            self._outage_edits += 1
+            if self._outage_timer is not None:
+                self._outage_timer.cancel()
+            timer = threading.Timer(
+                OUTAGE_EDIT_QUIET_S, self._commit_outages, args=(self._outage_edits,)
+            )
+            timer.daemon = True
+            self._outage_timer = timer
+        timer.start()
+
+    def _commit_outages(self, edit: int) -> None:
+        with self._lock:
+            if edit != self._outage_edits:
+                return  # typed again since
+            self._outage_timer = None
+            text = str(self.outage_field.value)
+        try:
+            self.controller.set_outages(parse_outages(text))
+        except RoutefuseError as exc:
+            kept = format_outages(self.controller.outages) or "none"
+            self.client.add_notification(
+                "GNSS outages not changed",
+                f"{exc} (kept: {kept})",
+                color="red",
+                auto_close_seconds=12.0,
+            )
+
+    def _on_save(self, event: Event) -> None:
+        text = params_to_toml(self.controller.params)
+        self.client.send_file_download(
+            "routefuse-params.toml", text.encode("utf-8"), save_immediately=True
+        )
+
+    def sync(self) -> None:
+        """Show the controller's parameters (after another tab changed them, or a failure)."""
+        params = self.controller.params
+        for name, widget in self._widgets.items():
+            value = get_param(params, name)
+            if isinstance(value, tuple):
+                value = tuple(float(v) for v in value)
+            elif value is None:
+                value = ""
+            try:
+                if widget.value != value:
+                    show_value(widget, value)
+            except (TypeError, ValueError):
+                pass
+        if self.method.value != self.controller.method:
+            show_value(self.method, self.controller.method)
+        self.sync_outages()
+
+    def sync_outages(self) -> None:
+        """Show the outages in effect, unless this tab is typing in the field (its text is
+        applied, or refused, when the typing rests)."""
+        if self._outage_timer is not None:
+            return
+        wanted = self.controller.outages
+        try:
+            shown = parse_outages(str(self.outage_field.value))
+        except RoutefuseError:
+            shown = None
+        if shown != wanted:
+            show_value(self.outage_field, format_outages(wanted))
+
+    def close(self) -> None:
+        with self._lock:
+            if self._outage_timer is not None:
+                self._outage_timer.cancel()
+                self._outage_timer = None

@@ -1,0 +1,18 @@
+"""What the panels share about viser's controls."""
+
+from __future__ import annotations
+
+from typing import Any
+
+import viser
+from viser._gui_handles import GuiProgressBarHandle  # viser does not export it
+
+Event = viser.GuiEvent[Any]
+"""a control's update or click, as its callbacks receive it"""
+
+
+def show_value(control: viser.GuiInputHandle[Any] | GuiProgressBarHandle, value: Any) -> None:
+    """Set what a control shows (viser sends it to the browser and runs its update callbacks)."""
+    # viser's control classes inherit a `value` field from their props dataclass beside the
+    # `value` property with its setter, which mypy takes for a read-only property
+    control.value = value  # type: ignore[misc]  # a settable property, see above

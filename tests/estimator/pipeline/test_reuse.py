@@ -1,0 +1,124 @@
+"""Re-run reuse: a run resumed from a previous one equals a run from scratch, and resumes only
+from where a parameter change makes a difference."""
+
+from __future__ import annotations
+
+import dataclasses
+
+import numpy as np
+import pytest
+
+from estimator.log import ImuData
+from estimator.params import Params, with_values
+from estimator.pipeline import run
+
+
+def _same_epochs(a, b):
+    fields = [f.name for f in dataclasses.fields(a.epochs)]
+    return all(np.array_equal(getattr(a.epochs, f), getattr(b.epochs, f)) for f in fields)
+
+
+@pytest.mark.parametrize(
+    "change",
+    [
+        {"gates.max_residual_m": 0.2},
+        {"window.length_m": 150.0},
+        {"trigger.interval_s": 2.5},
+        {"pseudo.sigma_m": 5.0},
+        {"noise.nhc_sigma_m_s": 0.3},
+    ],
+)
+def test_reuse_gives_the_same_run_as_starting_over(tunnel, tunnel_proposed, change):
+    log, route, frame = tunnel
+    p = with_values(Params(), change)
+    again = run(log, route, p, method="proposed", frame=frame, reuse=tunnel_proposed)
+    fresh = run(log, route, p, method="proposed", frame=frame)
+    assert _same_epochs(again, fresh)
+    assert len(again.matches) == len(fresh.matches)
+    for a, b in zip(again.matches, fresh.matches, strict=True):
+        assert (a.index, a.epoch, a.accepted, a.verdict) == (
+            b.index,
+            b.epoch,
+            b.accepted,
+            b.verdict,
+        )
+        np.testing.assert_array_equal(a.correction, b.correction)
+        assert a.gates == b.gates
+
+
+def test_reuse_of_a_baseline_run_for_proposed(tunnel):
+    log, route, frame = tunnel
+    base = run(log, route, Params(), method="baseline", frame=frame)
+    again = run(log, route, Params(), method="proposed", frame=frame, reuse=base)
+    fresh = run(log, route, Params(), method="proposed", frame=frame)
+    assert _same_epochs(again, fresh)
+    assert [m.accepted for m in again.matches] == [m.accepted for m in fresh.matches]
+
+
+def test_reuse_is_ignored_for_another_log(tunnel, tunnel_proposed):
+    log, route, frame = tunnel
+    gyro = log.imu.gyro.copy()
+    gyro[:, 2] += np.radians(0.01)  # another log: same times, a different gyro
+    other = dataclasses.replace(log, imu=ImuData(t=log.imu.t, gyro=gyro, accel=log.imu.accel))
+    again = run(other, route, Params(), method="proposed", frame=frame, reuse=tunnel_proposed)
+    fresh = run(other, route, Params(), method="proposed", frame=frame)
+    assert _same_epochs(again, fresh)
+    assert not _same_epochs(again, tunnel_proposed)
+    # a copy of the same log is the same log (a Run can be pickled and reused)
+    same = dataclasses.replace(log)
+    assert _same_epochs(
+        run(same, route, Params(), frame=frame, reuse=tunnel_proposed), tunnel_proposed
+    )
+
+
+def test_baseline_after_baseline_reuses_the_whole_run(tunnel, monkeypatch):
+    """Matching parameters do not touch the baseline: the re-run is the previous run."""
+    log, route, frame = tunnel
+    base = run(log, route, Params(), method="baseline", frame=frame)
+    p = with_values(Params(), {"gates.max_residual_m": 0.5, "window.length_m": 150.0})
+    fresh = run(log, route, p, method="baseline", frame=frame)
+    from estimator.filter import engine
+
+    def no_filter(*args, **kwargs):
+        raise AssertionError("the filter ran")
+
+    monkeypatch.setattr(engine, "run_until", no_filter)
+    again = run(log, route, p, method="baseline", frame=frame, reuse=base)
+    assert _same_epochs(again, fresh) and again.params == p and again.matches == ()
+    assert again.dropped_fix_times == fresh.dropped_fix_times
+    assert again.epochs is base.epochs  # shared: what was computed from them is recognised
+
+
+@pytest.mark.parametrize(
+    "change",
+    [{"gates.max_residual_m": 2.9}, {"gates.min_pairs": 52}, {"gates.max_rotation_deg": 1}],
+)
+def test_a_gate_change_refits_no_attempt_before_the_first_changed_outcome(
+    tunnel, tunnel_proposed, monkeypatch, change
+):
+    log, route, frame = tunnel
+    p = with_values(Params(), change)
+    fresh = run(log, route, p, method="proposed", frame=frame)
+    changed = [
+        i
+        for i, (a, b) in enumerate(zip(fresh.matches, tunnel_proposed.matches, strict=False))
+        if a.accepted != b.accepted
+    ]
+    from estimator.pipeline import driver
+
+    fits = []
+    real = driver.match_geometry
+
+    def counting(*args, **kwargs):
+        fits.append(1)
+        return real(*args, **kwargs)
+
+    monkeypatch.setattr(driver, "match_geometry", counting)
+    again = run(log, route, p, method="proposed", frame=frame, reuse=tunnel_proposed)
+    assert _same_epochs(again, fresh)
+    assert [m.gates for m in again.matches] == [m.gates for m in fresh.matches]
+    if not changed:
+        assert not fits  # only re-judged
+    else:
+        # live again from the first changed attempt on (long windows may add fits)
+        assert 0 < len(fits) <= 2 * (len(fresh.matches) - changed[0])

@@ -1,0 +1,28 @@
+"""The match panel text (the rest of the app is driven in tests/e2e)."""
+
+from __future__ import annotations
+
+from fake_runs import make_run
+
+from inspector.app import match_markdown
+
+
+def test_match_panel_lists_every_gate_and_marks_the_failed_one():
+    run = make_run(rejected=(2,))
+    text = match_markdown(run.matches[2], t_rel=50.0, total=5)
+    assert "Attempt #2 of 5 at t = 50.00 s: REJECTED" in text
+    rows = [line for line in text.splitlines() if line.startswith("| ")]
+    gate_rows = {r.split("|")[1].strip(): r for r in rows[1:4]}
+    assert set(gate_rows) == {"min_pairs", "heading", "residual"}
+    assert "✗ **FAILED**" in gate_rows["residual"] and "<= 3.000" in gate_rows["residual"]
+    assert "✓ passed" in gate_rows["min_pairs"]
+    assert "| residual (RMS) | 7.500 m |" in text
+    assert "| correction E, N | (0.00, 0.00) m" in text
+
+
+def test_match_panel_for_an_accepted_attempt_and_for_none():
+    run = make_run(rejected=())
+    text = match_markdown(run.matches[0], t_rel=40.0, age_s=1.5, total=5)
+    assert "ACCEPTED" in text and "(1.50 s ago)" in text and "FAILED" not in text
+    assert "| correction E, N | (0.00, -2.00) m" in text
+    assert "No match attempt" in match_markdown(None)

@@ -1,0 +1,41 @@
+"""Start-up is not the bottleneck (issue 15, property 11): building the parser, which is all
+``routefuse --help`` does, imports none of the heavy libraries; each command imports what it
+needs when it runs. Checked in a fresh interpreter, so this test's own imports do not count."""
+
+from __future__ import annotations
+
+import subprocess
+import sys
+from pathlib import Path
+
+HEAVY = ("numpy", "numba", "scipy", "pyproj", "rosbags", "viser", "matplotlib")
+REPO = Path(__file__).resolve().parents[3]
+
+
+def _imported_after(code: str) -> list[str]:
+    probe = f"import sys\n{code}\nprint(' '.join(m for m in {HEAVY!r} if m in sys.modules))"
+    out = subprocess.run(
+        [sys.executable, "-c", probe], cwd=REPO, capture_output=True, text=True, check=True
+    )
+    return out.stdout.split()
+
+
+def test_building_the_parser_imports_nothing_heavy() -> None:
+    assert _imported_after("from inspector.cli.main import build_parser; build_parser()") == []
+
+
+def test_the_log_registry_and_the_estimator_face_are_light() -> None:
+    code = "import estimator, estimator.io; estimator.io.LOG_FORMATS_TEXT"
+    assert _imported_after(code) == []
+
+
+def test_help_prints_every_command() -> None:
+    out = subprocess.run(
+        [sys.executable, "-m", "inspector", "--help"],
+        cwd=REPO,
+        capture_output=True,
+        text=True,
+        check=True,
+    ).stdout
+    for name in ("info", "run", "simulate", "serve", "export", "bench"):
+        assert name in out
