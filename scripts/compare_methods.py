@@ -7,8 +7,8 @@
 
 It runs what ``routefuse run LOG --route ROUTE --method baseline proposed paper
 --subtract-lane-offset`` runs (:func:`estimator.pipeline.run_methods`,
-:func:`estimator.evaluation.metrics.method_metrics` over the GNSS-degraded intervals, route deviations
-measured from the learned lane) with the default parameters, plus:
+:func:`estimator.evaluation.method_metrics` over the GNSS-degraded intervals, route
+deviations measured from the learned lane) with the default parameters, plus:
 
 - ``routefuse + heading obs.``: ``extensions.heading_observation = true``;
 - ``no wheel``: the same log with its wheel-speed topic dropped (IMU + GNSS only);

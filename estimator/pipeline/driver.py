@@ -49,7 +49,6 @@ from estimator.filter.route_update import apply_route_match
 from estimator.filter.setup import FilterInputs, prepare_inputs
 from estimator.filter.updates import clone_lane_offset
 from estimator.log import Log
-from estimator.matching.kernels import max_turn_deg, search_right, track_window
 from estimator.matching import (
     MatchGeometry,
     geometry_params,
@@ -58,6 +57,7 @@ from estimator.matching import (
     match_geometry,
     route_arc_length,
 )
+from estimator.matching.kernels import max_turn_deg, search_right, track_window
 from estimator.nav.frames import LocalFrame
 from estimator.params import Method, Params, for_method
 from estimator.pipeline.reuse import (

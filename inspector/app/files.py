@@ -11,7 +11,7 @@ from viser import _messages
 
 from estimator.errors import RoutefuseError
 from estimator.io import LOG_SUFFIXES_TEXT
-from inspector.app.widgets import Event, show_value
+from inspector.app.widgets import Event, markdown_text, show_value
 from inspector.controller import Session, format_outages
 from inspector.folders import ROUTE_SUFFIXES_TEXT
 
@@ -51,7 +51,7 @@ class FilesPanel:
             )
             self.upload_route.on_upload(self._uploader("route"))
             self._refuse_large_uploads(gui, uploads.max_bytes)
-        folders = "\n".join(f"- `{r}`" for r in self.controller.folders.roots)
+        folders = "\n".join(f"- {markdown_text(r)}" for r in self.controller.folders.roots)
         gui.add_markdown(f"Files are listed from:\n{folders}")
 
     def _refuse_large_uploads(self, gui: viser.GuiApi, max_bytes: int) -> None:

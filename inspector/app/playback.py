@@ -13,7 +13,7 @@ from typing import TYPE_CHECKING, Any
 import numpy as np
 import viser
 
-from inspector.app.widgets import Event, show_value
+from inspector.app.widgets import Event, markdown_text, show_value
 from inspector.controller import Session, format_outages
 
 if TYPE_CHECKING:
@@ -36,7 +36,8 @@ def status_markdown(s: Session) -> str:
     """The status line of a session: files, length, attempts, and the off-route summary."""
     tl = s.timeline
     text = (
-        f"**{s.log_name}** · route **{s.route_name}** · {tl.duration:.0f} s, "
+        f"**{markdown_text(s.log_name)}** · route **{markdown_text(s.route_name)}** · "
+        f"{tl.duration:.0f} s, "
         f"{tl.n_frames} frames, {len(tl.match_t)} match attempts "
         f"({int((~tl.match_accepted).sum())} rejected)"
     )
@@ -182,7 +183,7 @@ class PlaybackPanel:
         self.progress.visible = not done
         show_value(self.progress, float(np.clip(fraction * 100, 0, 100)))
         if not done:
-            self.status.content = f"*{message}* ({fraction * 100:.0f} %)"
+            self.status.content = f"*{markdown_text(message)}* ({fraction * 100:.0f} %)"
         elif session is not None:
             self.status.content = status_markdown(session)
         else:

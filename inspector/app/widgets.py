@@ -2,6 +2,8 @@
 
 from __future__ import annotations
 
+import html
+import re
 from typing import Any
 
 import viser
@@ -16,3 +18,13 @@ def show_value(control: viser.GuiInputHandle[Any] | GuiProgressBarHandle, value:
     # viser's control classes inherit a `value` field from their props dataclass beside the
     # `value` property with its setter, which mypy takes for a read-only property
     control.value = value  # type: ignore[misc]  # a settable property, see above
+
+
+_MARKDOWN_PUNCTUATION = re.compile(r"([\\`*_{}\[\]()#+\-.!|~])")
+
+
+def markdown_text(text: object) -> str:
+    """``text`` (a file name, a path, anything a file or the user chose) as literal text in
+    viser's markdown, which renders raw HTML unsanitised: markdown punctuation backslash-escaped,
+    then HTML's special characters as entities (the standard library's ``html.escape``)."""
+    return html.escape(_MARKDOWN_PUNCTUATION.sub(r"\\\1", str(text)))

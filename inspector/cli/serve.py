@@ -54,6 +54,15 @@ def add_arguments(parser: argparse.ArgumentParser) -> None:
     )
     parser.add_argument("--port", type=int, default=8080, help="port (default 8080)")
     parser.add_argument(
+        "--allow-origin",
+        metavar="URL",
+        action="append",
+        default=[],
+        help="also accept browser connections from pages of this origin (http://HOST:PORT; "
+        "repeatable). By default only the inspector's own page may connect: a page of any "
+        "other site cannot drive the inspector",
+    )
+    parser.add_argument(
         "--data-dir",
         metavar="DIR",
         action="append",
@@ -114,13 +123,16 @@ def start(
     method: MatchingMethod = "proposed",
     outages: Sequence[tuple[float, float]] = (),
     max_upload_bytes: int = 100 * 1024 * 1024,
+    allow_origins: Sequence[str] = (),
     verbose: bool = False,
 ) -> tuple[viser.ViserServer, Controller, InspectorApp]:
     """Start the server and the controller (returns ``(server, controller, app)``; used by the
     command and by the tests). ``outages`` are injected into the first log only: they are
-    times in that log."""
+    times in that log. Websocket connections are accepted only from the server's own origin
+    and ``allow_origins`` (:mod:`inspector.origin_guard`)."""
     import viser
 
+    from inspector import origin_guard
     from inspector.app import InspectorApp
     from inspector.controller import Controller
     from inspector.folders import DataFolders, UploadFolder
@@ -135,6 +147,10 @@ def start(
         params=params,
         method=method,
     )
+    try:
+        origin_guard.install(allow_origins)
+    except ValueError as exc:
+        raise RoutefuseError("--allow-origin", str(exc)) from None
     server = viser.ViserServer(host=host, port=port, verbose=verbose)
     app = InspectorApp(server, controller)
     if log is not None and route is not None:
@@ -179,6 +195,7 @@ def execute(args: argparse.Namespace) -> int:
         method=args.method,
         outages=outages,
         max_upload_bytes=int(args.max_upload_mb * 1e6),
+        allow_origins=args.allow_origin,
     )
     shown = "127.0.0.1" if args.host in ("0.0.0.0", "::") else args.host
     print(f"routefuse inspector: http://{shown}:{server.get_port()}  (Ctrl+C to stop)", flush=True)

@@ -35,6 +35,8 @@ def _sample(tmp_path_factory: pytest.TempPathFactory) -> tuple[Path, Path]:
 
 
 UPLOAD_LIMIT = 1_000_000
+HOSTILE_NAME = '<img src=x onerror="window.pwned=1">[link](javascript:window.pwned=2)*bold*'
+"""a data folder's name that runs script if the page renders it as HTML or markdown"""
 
 
 @pytest.fixture(scope="module")
@@ -44,10 +46,12 @@ def inspector(tmp_path_factory):
     log, route = _sample(tmp_path_factory)
     extra = tmp_path_factory.mktemp("extra")
     (extra / "broken.mcap").write_bytes(b"this is not an mcap file")
+    hostile = tmp_path_factory.mktemp("data") / HOSTILE_NAME
+    hostile.mkdir()
     server, controller, app = start(
         host="127.0.0.1",
         port=free_port(),
-        data_dirs=[extra],
+        data_dirs=[extra, hostile],
         log=log,
         route=route,
         max_upload_bytes=UPLOAD_LIMIT,
@@ -523,3 +527,14 @@ def test_off_route_is_shown_when_the_drive_leaves_the_route(page, inspector, tmp
     text = pg.inner_text("body")
     assert re.search(r"GNSS \w+ · OFF-ROUTE \(truth [\d.]+ m from the route\)", text), text[:800]
     assert "the vehicle (truth) is" in text  # the match panel
+
+
+def test_a_hostile_folder_name_is_shown_as_text_never_run(page):
+    """Stored XSS (issue 16): names from the disk reach the page as literal text."""
+    pg, _ = page
+    pg.get_by_role("tab", name="Files").click()
+    _wait(lambda: HOSTILE_NAME in pg.inner_text("body"), 10, "the folder name as text")
+    assert pg.evaluate("() => window.pwned === undefined")
+    assert pg.locator("img[src='x']").count() == 0
+    assert pg.locator("a[href^='javascript']").count() == 0
+    pg.get_by_role("tab", name="Match").click()

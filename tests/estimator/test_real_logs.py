@@ -13,8 +13,8 @@ from estimator.evaluation.metrics import match_summary, method_metrics
 from estimator.io import load_log
 from estimator.io.routebuild import route_from_gnss
 from estimator.params import Params, load_params
-from estimator.pipeline.inputs import open_inputs
 from estimator.pipeline import run
+from estimator.pipeline.inputs import open_inputs
 
 REPO = Path(__file__).resolve().parents[2]
 DATA = REPO.parent / "shared" / "data"

@@ -84,3 +84,44 @@ def test_an_uploaded_file_is_readable_by_its_owner_only():
         assert again != path and path.read_bytes() == b"abc"
     finally:
         up.close()
+
+
+def test_the_inspector_refuses_websockets_from_other_origins(tmp_path):
+    """Cross-site WebSocket hijacking (issue 16): a page of another site cannot connect to the
+    inspector the user runs; its own page, its loopback twins and --allow-origin can."""
+    import websockets.exceptions
+    from websockets.sync.client import connect
+
+    port = _free_port()
+    server, controller, app = serve.start(
+        host="127.0.0.1",
+        port=port,
+        data_dirs=[tmp_path],
+        allow_origins=["http://dashboard.lan:3000"],
+    )
+
+    def status(origin: str) -> int:
+        try:
+            with connect(f"ws://127.0.0.1:{port}", origin=origin, open_timeout=5):
+                return 101
+        except websockets.exceptions.InvalidStatus as exc:
+            return exc.response.status_code
+
+    try:
+        assert status("http://attacker.example") == 403
+        assert status(f"http://localhost:{port + 1}") == 403
+        assert status(f"http://127.0.0.1:{port}") == 101
+        assert status(f"http://localhost:{port}") == 101
+        assert status("http://dashboard.lan:3000") == 101
+    finally:
+        app.close()
+        controller.close()
+        server.stop()
+
+
+def test_a_malformed_allow_origin_is_one_line_exit_2(capsys):
+    from inspector.cli.main import main
+
+    assert main(["serve", "--allow-origin", "dashboard.lan", "--port", str(_free_port())]) == 2
+    err = capsys.readouterr().err.strip()
+    assert err.startswith("routefuse: error: --allow-origin:") and "\n" not in err
