@@ -15,17 +15,17 @@ from pathlib import Path
 from typing import Literal
 
 from estimator.errors import RoutefuseError
-from estimator.io import LOG_SUFFIXES_TEXT, is_log_path, log_suffixes
+from estimator.io import (
+    LOG_SUFFIXES_TEXT,
+    ROUTE_SUFFIXES_TEXT,
+    is_log_path,
+    is_route_path,
+    log_suffixes,
+    route_format,
+)
 
 Kind = Literal["log", "route"]
-ROUTE_SUFFIXES = (".geojson", ".gpx", ".kml", ".csv")
-ROUTE_SUFFIXES_TEXT = ", ".join(ROUTE_SUFFIXES[:-1]) + " or " + ROUTE_SUFFIXES[-1]
-"""'.geojson, .gpx, .kml or .csv': for upload hints and messages"""
 DEFAULT_UPLOAD_LIMIT = 100 * 1024 * 1024
-
-
-def _is_route(path: Path) -> bool:
-    return path.name.lower().endswith(ROUTE_SUFFIXES) or path.name.lower().endswith(".route.json")
 
 
 @dataclass(frozen=True)
@@ -82,7 +82,7 @@ class DataFolders:
                 name = f"{label}/{path.relative_to(root).as_posix()}"
                 if path.is_dir() or is_log_path(path):
                     logs[name] = path
-                elif _is_route(path):
+                elif is_route_path(path):
                     routes[name] = path
         return Listing(dict(sorted(logs.items())), dict(sorted(routes.items())))
 
@@ -102,7 +102,7 @@ class DataFolders:
             dirnames[:] = [d for d in dirnames if not d.startswith(".")]
             for name in sorted(filenames):
                 p = here / name
-                if (is_log_path(p) or _is_route(p)) and _inside(p, root):
+                if (is_log_path(p) or is_route_path(p)) and _inside(p, root):
                     yield p
 
     def resolve(self, name: str, kind: Kind) -> Path:
@@ -161,7 +161,7 @@ class UploadFolder:
             raise RoutefuseError(filename, "the uploaded file is empty")
         base = re.sub(r"[^A-Za-z0-9._-]+", "_", Path(filename.replace("\\", "/")).name)
         base = base.lstrip(".") or "upload"
-        if not (Path(base).suffix.lower() in log_suffixes() or _is_route(Path(base))):
+        if not (Path(base).suffix.lower() in log_suffixes() or route_format(base) is not None):
             raise RoutefuseError(
                 filename, f"not a log ({LOG_SUFFIXES_TEXT}) or route ({ROUTE_SUFFIXES_TEXT})"
             )

@@ -25,6 +25,7 @@ from estimator.io.routeformats import (
     ROUTE_FORMATS,
     ROUTE_FORMATS_TEXT,
     ROUTE_SUFFIXES_TEXT,
+    is_route_path,
     route_beside,
     route_format,
 )
@@ -75,6 +76,7 @@ __all__ = [
     "default_cache_dir",
     "describe_topics",
     "is_log_path",
+    "is_route_path",
     "is_truth_topic",
     "load_log",
     "load_route",

@@ -28,6 +28,17 @@ def route_format(path: str | Path) -> RouteFormat | None:
     return ROUTE_FORMATS.get(Path(path).suffix.lower())
 
 
+LISTED_ROUTE_SUFFIXES = (".geojson", ".gpx", ".kml", ".csv", ".route.json")
+"""What a folder listing or an upload takes for a route file (a bare ``.json`` is as likely
+anything else)."""
+
+
+def is_route_path(path: str | Path) -> bool:
+    """Whether a file picker, an upload check or a batch finder takes ``path`` for a route, by
+    its name."""
+    return Path(path).name.lower().endswith(LISTED_ROUTE_SUFFIXES)
+
+
 def route_beside(log: str | Path) -> Path | None:
     """The route that belongs to a log, by name: ``<stem>.route.<suffix>`` (the simulator and the
     samples name them so), else ``<stem>.<suffix>``, in the log's folder."""

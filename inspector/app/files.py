@@ -10,10 +10,9 @@ import viser
 from viser import _messages
 
 from estimator.errors import RoutefuseError
-from estimator.io import LOG_SUFFIXES_TEXT
+from estimator.io import LOG_SUFFIXES_TEXT, ROUTE_SUFFIXES_TEXT
 from inspector.app.widgets import Event, markdown_text, show_value
 from inspector.controller import Session, format_outages
-from inspector.folders import ROUTE_SUFFIXES_TEXT
 
 if TYPE_CHECKING:
     from inspector.app.view import ClientView

@@ -10,12 +10,12 @@ from dataclasses import dataclass
 from pathlib import Path
 
 from estimator.errors import RoutefuseError
-from estimator.io import AUTO_TOPICS, LOG_FORMATS_TEXT, TopicChoice, is_log_path
+from estimator.io import AUTO_TOPICS, LOG_FORMATS_TEXT, TopicChoice, is_log_path, is_route_path
+from estimator.io import route_beside as find_route_beside
 from estimator.params import Method, Params
 from inspector.export import tables as export_tables
 from inspector.export.replay import ExportResult, ReplayOptions, export_log, make_dir
 
-ROUTE_SUFFIX = ".route.geojson"
 """how the route beside a log is named: ``<stem>.route.geojson``"""
 DEFAULT_REPLAY = ReplayOptions()
 
@@ -53,7 +53,7 @@ def find_logs(spec: str | Path) -> list[Path]:
         found = [c for c in sorted(p.iterdir()) if is_log_path(c)]
     else:
         found = [Path(m) for m in sorted(glob.glob(str(p)))]
-        found = [m for m in found if not m.name.endswith(ROUTE_SUFFIX)]
+        found = [m for m in found if not is_route_path(m)]
     if not found:
         raise RoutefuseError(
             spec, f"no logs found (expected a folder holding {LOG_FORMATS_TEXT}, or a glob)"
@@ -62,11 +62,15 @@ def find_logs(spec: str | Path) -> list[Path]:
 
 
 def route_beside(log: Path) -> Path:
-    """``<stem>.route.geojson`` next to the log, as the sample logs are named."""
-    stem = log.name.split(".")[0]
-    route = log.parent / f"{stem}{ROUTE_SUFFIX}"
-    if not route.is_file():
-        raise RoutefuseError(log, f"no route {route.name} beside the log")
+    """The route named after the log beside it (:func:`estimator.io.route_beside`)."""
+    route = find_route_beside(log)
+    if route is None:
+        stem = log.name.split(".")[0]
+        raise RoutefuseError(
+            log,
+            f"no route {stem}.route.geojson beside the log "
+            "(nor a .gpx, .kml or .csv named after it)",
+        )
     return route
 
 

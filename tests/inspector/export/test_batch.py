@@ -21,3 +21,10 @@ def test_find_logs_in_a_folder_and_by_glob(tmp_path):
         route_beside(tmp_path / "b.bag")
     with pytest.raises(RoutefuseError, match="no logs found"):
         find_logs(tmp_path / "d")
+
+
+def test_the_batch_pairs_a_log_with_a_route_of_any_format_named_after_it(tmp_path):
+    (tmp_path / "drive.bag").write_text("x")
+    (tmp_path / "drive.route.gpx").write_text("x")
+    assert route_beside(tmp_path / "drive.bag") == tmp_path / "drive.route.gpx"
+    assert [p.name for p in find_logs(str(tmp_path / "drive.*"))] == ["drive.bag"]
