@@ -1,4 +1,4 @@
-"""Routes derived from a recorded track (estimator/routebuild.py)."""
+"""Routes derived from a recorded track (estimator/io/routebuild.py)."""
 
 from __future__ import annotations
 
