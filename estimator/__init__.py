@@ -6,8 +6,9 @@ Pure computation; never imports the inspector or viser.
 
 from __future__ import annotations
 
-import importlib
-from typing import TYPE_CHECKING, Any
+from typing import TYPE_CHECKING
+
+from estimator._lazy import lazy_getattr
 
 if TYPE_CHECKING:
     from estimator.errors import ConfigError, LogError, RouteError, RoutefuseError
@@ -59,13 +60,7 @@ _HOME = {
 (``estimator.errors`` for the CLI's parser) does not import numpy, pyproj and the rest."""
 
 
-def __getattr__(name: str) -> Any:
-    home = _HOME.get(name)
-    if home is None:
-        raise AttributeError(f"module 'estimator' has no attribute {name!r}")
-    value = getattr(importlib.import_module(home), name)
-    globals()[name] = value
-    return value
+__getattr__ = lazy_getattr(__name__, _HOME)
 
 
 __all__ = [

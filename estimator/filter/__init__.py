@@ -7,8 +7,9 @@ Kernels compile on first use (cached on disk), so the face imports them lazily."
 
 from __future__ import annotations
 
-import importlib
-from typing import TYPE_CHECKING, Any
+from typing import TYPE_CHECKING
+
+from estimator._lazy import lazy_getattr
 
 if TYPE_CHECKING:
     from estimator.filter.engine import Filter, FilterState, epochs_of
@@ -52,8 +53,4 @@ __all__ = [
 ]
 
 
-def __getattr__(name: str) -> Any:
-    home = _HOMES.get(name)
-    if home is None:
-        raise AttributeError(f"module {__name__!r} has no attribute {name!r}")
-    return getattr(importlib.import_module(home), name)
+__getattr__ = lazy_getattr(__name__, _HOMES)

@@ -5,8 +5,9 @@ face; names are imported on first use, so that reading a rotation does not impor
 
 from __future__ import annotations
 
-import importlib
-from typing import TYPE_CHECKING, Any
+from typing import TYPE_CHECKING
+
+from estimator._lazy import lazy_getattr
 
 if TYPE_CHECKING:
     from estimator.nav.earth import OMEGA_IE, earth_rate_n, gravity_n, normal_gravity
@@ -49,10 +50,4 @@ __all__ = [
 ]
 
 
-def __getattr__(name: str) -> Any:
-    home = _HOME.get(name)
-    if home is None:
-        raise AttributeError(f"module 'estimator.nav' has no attribute {name!r}")
-    value = getattr(importlib.import_module(home), name)
-    globals()[name] = value
-    return value
+__getattr__ = lazy_getattr(__name__, _HOME)
