@@ -1,5 +1,5 @@
-import sys
+"""``python -m inspector``: the ``routefuse`` command."""
 
-from inspector.cli.main import main
+from inspector.cli.main import console
 
-sys.exit(main())
+console()
