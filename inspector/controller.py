@@ -15,13 +15,19 @@ import traceback
 from collections.abc import Callable, Iterable
 from dataclasses import dataclass, field, fields
 from pathlib import Path
-from typing import TYPE_CHECKING, Any, Literal, Protocol
+from typing import TYPE_CHECKING, Any, Protocol
 
 import numpy as np
 
 from estimator.errors import RoutefuseError
-from estimator.params import Params, with_values
+from estimator.params import Params
 from estimator.results import Run
+from inspector.browser_values import (
+    PROPOSED_METHODS,
+    ProposedMethod,
+    checked_method,
+    with_param,
+)
 from inspector.folders import DataFolders, Kind, Listing, UploadFolder
 from inspector.scene_data import SceneData
 from inspector.timeline import (
@@ -40,9 +46,9 @@ if TYPE_CHECKING:
     from inspector.offroute import OffRoute
     from inspector.plots import DeviationPlot
 
-ProposedMethod = Literal["proposed", "paper"]
 
 __all__ = [
+    "PROPOSED_METHODS",
     "Controller",
     "DataFolders",
     "Kind",
@@ -54,9 +60,11 @@ __all__ = [
     "Superseded",
     "Timeline",
     "UploadFolder",
+    "checked_method",
     "format_outages",
     "normalise_outages",
     "parse_outages",
+    "with_param",
 ]
 
 
@@ -358,15 +366,20 @@ class Controller:
         self._request(params=params)
 
     def set_param(self, name: str, value: Any) -> None:
-        """Change one parameter by dotted name (checked at once: a bad value raises
-        :class:`ConfigError` here, not on the worker)."""
-        self.set_params(with_values(self.params, {name: value}, "parameter panel"))
+        """Change one parameter by dotted name (checked at once by :func:`with_param`: a bad
+        value raises :class:`ConfigError` here, not on the worker)."""
+        self.set_params(with_param(self.params, name, value))
 
     def reset_params(self) -> None:
         self.set_params(Params())
 
     def set_method(self, method: ProposedMethod) -> None:
-        self._request(method=method)
+        """Compare another method with the baseline (anything else is refused here)."""
+        self._request(method=checked_method(method))
+
+    def check_choice(self, name: str, kind: Kind) -> None:
+        """Refuse a file name that is not in the listing (what a file dropdown may show)."""
+        self._folders.resolve(name, kind)
 
     def set_outages(self, outages: Iterable[tuple[float, float]]) -> None:
         """Inject GNSS outages into the loaded log (checked at once; a start after the end of

@@ -3,6 +3,7 @@ playhead over them, and the injected GNSS outages as the user types them."""
 
 from __future__ import annotations
 
+import math
 from collections.abc import Iterable
 from dataclasses import dataclass
 
@@ -17,6 +18,12 @@ F64 = NDArray[np.float64]
 
 Outages = tuple[tuple[float, float], ...]
 """injected GNSS outages: (start, end) seconds after the log start, as ``--outage START:END``"""
+MAX_OUTAGES = 100
+"""outages one request may inject (each costs both runs a little)"""
+MAX_OUTAGE_TEXT = 4000
+"""characters the outage field may hold (a hundred outages fit with room)"""
+PLAY_SPEEDS = ("0.25x", "0.5x", "1x", "2x", "5x", "10x", "20x", "50x")
+"""the playback speeds a tab offers (the only ones it accepts)"""
 
 
 @dataclass(frozen=True)
@@ -48,6 +55,18 @@ class Timeline:
 
     def clamp(self, t: float) -> float:
         return float(np.clip(t, self.t[0], self.t[-1])) if len(self.t) else 0.0
+
+    def checked_time(self, t: float | str) -> float:
+        """``t`` (a slider's value from the browser) when it is a time of this timeline, to the
+        slider's rounding; anything else is refused."""
+        try:
+            value = float(t)
+        except (TypeError, ValueError):
+            value = math.nan
+        end = max(self.duration, 0.0)
+        if not (math.isfinite(value) and -0.01 <= value <= end + 0.01 * max(1.0, end)):
+            raise ConfigError("time", f"{str(t)[:40]} s is not a time in this log (0 to {end:g} s)")
+        return self.clamp(value)
 
     def frame_at(self, t: float) -> int:
         """The last frame at or before ``t`` (clamped)."""
@@ -96,9 +115,21 @@ class Playhead:
         self.t = timeline.clamp(t)
 
 
+def parse_speed(label: object) -> float:
+    """The playback speed of one of :data:`PLAY_SPEEDS` (a browser may send anything)."""
+    if label not in PLAY_SPEEDS:
+        raise ConfigError("speed", f"{str(label)[:40]!r} is not one of {', '.join(PLAY_SPEEDS)}")
+    return float(str(label).rstrip("x"))
+
+
 def parse_outages(text: str) -> Outages:
     """Outages typed as ``30:60, 90:120`` (each part read by the ``--outage`` parser, so the
-    command line and the UI accept the same values); empty text means none."""
+    command line and the UI accept the same values); empty text means none. At most
+    :data:`MAX_OUTAGE_TEXT` characters and :data:`MAX_OUTAGES` outages."""
+    if len(text) > MAX_OUTAGE_TEXT:
+        raise ConfigError(
+            "GNSS outages", f"{len(text)} characters: at most {MAX_OUTAGE_TEXT} are read"
+        )
     parts = [p.strip() for p in text.split(",")]
     try:
         return normalise_outages(parse_outage(p) for p in parts if p)
@@ -109,8 +140,10 @@ def parse_outages(text: str) -> Outages:
 def normalise_outages(outages: Iterable[tuple[float, float]]) -> Outages:
     """Sorted float pairs, checked: the same outages typed in another order are the same
     request, so they do not re-run."""
-    out = []
+    out: list[tuple[float, float]] = []
     for a, b in outages:
+        if len(out) == MAX_OUTAGES:
+            raise ConfigError("GNSS outages", f"more than {MAX_OUTAGES} outages")
         a, b = float(a), float(b)
         if not (np.isfinite(a) and np.isfinite(b)) or not b > a:
             raise ConfigError("GNSS outages", f"{a:g}:{b:g}: END must be after START")

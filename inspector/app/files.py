@@ -4,7 +4,7 @@ accepted suffixes are the log-format registry's, :mod:`estimator.io`)."""
 from __future__ import annotations
 
 from collections.abc import Callable
-from typing import TYPE_CHECKING, Any, Literal
+from typing import TYPE_CHECKING, Any
 
 import viser
 from viser import _messages
@@ -12,13 +12,38 @@ from viser import _messages
 from estimator.errors import RoutefuseError
 from estimator.io import LOG_SUFFIXES_TEXT, ROUTE_SUFFIXES_TEXT
 from inspector.app.widgets import Event, markdown_text, show_value
-from inspector.controller import Session, format_outages
+from inspector.controller import Kind, Session, format_outages
 
 if TYPE_CHECKING:
     from inspector.app.view import ClientView
 
 NONE = "(none)"
 """the dropdown entry when there is nothing to choose"""
+
+
+MAX_NOTES = 8
+"""listing warnings shown in the Files tab (the rest are counted)"""
+
+
+def listing_notes(warnings: tuple[str, ...]) -> str:
+    """What the walk of the data folders skipped, as escaped markdown ('' when nothing)."""
+    if not warnings:
+        return ""
+    lines = [f"- {markdown_text(w[:300])}" for w in warnings[:MAX_NOTES]]
+    if len(warnings) > MAX_NOTES:
+        lines.append(f"- and {len(warnings) - MAX_NOTES} more")
+    return "**Not listed:**\n" + "\n".join(lines)
+
+
+def _transfers(*guis: viser.GuiApi) -> list[tuple[str, dict[str, Any]]]:
+    """The uploads viser is receiving through these tabs' controls (each declared size is a
+    bound on what it holds: a transfer that sends more is dropped)."""
+    seen: dict[int, dict[str, Any]] = {}
+    for gui in guis:
+        states = getattr(gui, "_current_file_upload_states", None)
+        if isinstance(states, dict):
+            seen[id(states)] = states
+    return [item for states in seen.values() for item in list(states.items())]
 
 
 class FilesPanel:
@@ -34,6 +59,9 @@ class FilesPanel:
         self.log_choice = gui.add_dropdown("log", logs, initial_value=logs[0])
         self.log_choice.on_update(self._on_log_choice)
         self.route_choice = gui.add_dropdown("route file", routes, initial_value=routes[0])
+        self.route_choice.on_update(self._on_route_choice)
+        self._accepted: dict[Kind, str] = {"log": logs[0], "route": routes[0]}
+        """the last choice of each dropdown that was in the listing (shown again on a refusal)"""
         self.open_button = gui.add_button("open", hint="load the chosen log and route")
         self.open_button.on_click(self._on_open)
         refresh = gui.add_button("refresh list")
@@ -49,37 +77,89 @@ class FilesPanel:
                 "upload route", hint=f"{ROUTE_SUFFIXES_TEXT}, {limit}"
             )
             self.upload_route.on_upload(self._uploader("route"))
-            self._refuse_large_uploads(gui, uploads.max_bytes)
+            self._bound_uploads(gui)
         folders = "\n".join(f"- {markdown_text(r)}" for r in self.controller.folders.roots)
         gui.add_markdown(f"Files are listed from:\n{folders}")
+        self.notes = gui.add_markdown(listing_notes(listing.warnings))
 
-    def _refuse_large_uploads(self, gui: viser.GuiApi, max_bytes: int) -> None:
-        """Drop an oversized upload when it starts, before its parts are buffered in memory.
+    def _bound_uploads(self, gui: viser.GuiApi) -> None:
+        """Bound every upload by the bytes it really sends, not by what it declares.
 
-        viser has no public size limit; its transfer state for this tab is dropped right after
-        viser creates it, so the parts that follow are ignored."""
+        viser has no size limit of its own: it buffers a transfer's parts in memory until as
+        many as declared have come. Two handlers beside viser's own (its websocket interface's
+        public ``register_handler``; viser's run first) drop the transfer state that viser
+        keeps for this tab, so the parts that follow are ignored: at the start when the declared
+        size is over the limit or the upload folder, with what every tab has in flight, would
+        be full; after each part once more bytes came than the declared size or the limit."""
         states = getattr(gui, "_current_file_upload_states", None)
         interface = getattr(gui, "_websock_interface", None)
         uploads = self.controller.uploads
         if states is None or interface is None or uploads is None:
             return
 
-        def check(_client_id: Any, message: _messages.FileTransferStartUpload) -> None:
-            if message.size_bytes > max_bytes:
-                states.pop(message.transfer_uuid, None)
-                try:
-                    uploads.check_size(message.filename, message.size_bytes)
-                except RoutefuseError as exc:
-                    self.view.notify_error(exc, "Upload rejected")
+        def drop(transfer_uuid: str, exc: RoutefuseError) -> None:
+            states.pop(transfer_uuid, None)
+            self.view.notify_error(exc, "Upload rejected")
 
-        interface.register_handler(_messages.FileTransferStartUpload, check)
+        def on_start(_client_id: Any, message: _messages.FileTransferStartUpload) -> None:
+            if message.transfer_uuid not in states:
+                return
+            in_flight = sum(
+                int(state["total_bytes"])
+                for uuid, state in _transfers(gui, *(v.client.gui for v in self.view.app.views()))
+                if uuid != message.transfer_uuid
+            )
+            try:
+                uploads.check_size(message.filename, message.size_bytes)
+                uploads.check_room(message.filename, in_flight + max(message.size_bytes, 0))
+            except RoutefuseError as exc:
+                drop(message.transfer_uuid, exc)
+
+        def on_part(_client_id: Any, message: _messages.FileTransferPart) -> None:
+            state = states.get(message.transfer_uuid)
+            if state is None:
+                return
+            try:
+                uploads.check_received(
+                    str(state["filename"]),
+                    int(state["total_bytes"]),
+                    int(state["transferred_bytes"]),
+                )
+            except RoutefuseError as exc:
+                drop(message.transfer_uuid, exc)
+
+        interface.register_handler(_messages.FileTransferStartUpload, on_start)
+        interface.register_handler(_messages.FileTransferPart, on_part)
+
+    def _choice(self, kind: Kind) -> viser.GuiDropdownHandle[str]:
+        return self.log_choice if kind == "log" else self.route_choice
+
+    def _accept(self, kind: Kind) -> bool:
+        """Whether the dropdown of ``kind`` shows a listed file (the browser may send any
+        text); a refused one is reported to this tab and the last accepted choice shown."""
+        choice = self._choice(kind)
+        value = choice.value
+        if value == self._accepted[kind]:
+            return True
+        try:
+            self.controller.check_choice(value, kind)
+        except RoutefuseError as exc:
+            self.view.notify_error(exc, "Refused")
+            show_value(choice, self._accepted[kind])
+            return False
+        self._accepted[kind] = value
+        return True
+
+    def _on_route_choice(self, event: Event) -> None:
+        if event.client is not None:
+            self._accept("route")
 
     def _on_log_choice(self, event: Event) -> None:
-        if event.client is None:
+        if event.client is None or not self._accept("log"):
             return
         route = self.controller.folders.default_route(self.log_choice.value)
         if route is not None and route in self.route_choice.options:
-            show_value(self.route_choice, route)
+            self._show("route", route)
 
     def _on_open(self, event: Event) -> None:
         log, route = self.log_choice.value, self.route_choice.value
@@ -97,7 +177,7 @@ class FilesPanel:
                 auto_close_seconds=6.0,
             )
 
-    def _uploader(self, kind: Literal["log", "route"]) -> Callable[[Event], None]:
+    def _uploader(self, kind: Kind) -> Callable[[Event], None]:
         def on_upload(event: Event) -> None:
             handle = self.upload_log if kind == "log" else self.upload_route
             up = handle.value
@@ -107,9 +187,8 @@ class FilesPanel:
                 self.view.notify_error(exc, "Upload rejected")
                 return
             self.view.app.refresh_files()
-            choice = self.log_choice if kind == "log" else self.route_choice
-            if name in choice.options:
-                show_value(choice, name)
+            if name in self._choice(kind).options:
+                self._show(kind, name)
             self.client.add_notification(
                 "Uploaded", f"{name}: press 'open' to load it", auto_close_seconds=6.0
             )
@@ -119,17 +198,27 @@ class FilesPanel:
     def show_session(self, session: Session) -> None:
         """Select the files a new session was opened from."""
         if session.log_name in self.log_choice.options:
-            show_value(self.log_choice, session.log_name)
+            self._show("log", session.log_name)
         if session.route_name in self.route_choice.options:
-            show_value(self.route_choice, session.route_name)
+            self._show("route", session.route_name)
+
+    def _show(self, kind: Kind, name: str) -> None:
+        """Show a listed file in the dropdown of ``kind`` (the server's own choice)."""
+        self._accepted[kind] = name
+        show_value(self._choice(kind), name)
 
     def refresh(self) -> None:
         listing = self.controller.folders.listing()
-        for choice, names in (
-            (self.log_choice, tuple(listing.logs)),
-            (self.route_choice, tuple(listing.routes)),
-        ):
-            keep = choice.value
+        self.notes.content = listing_notes(listing.warnings)
+        kinds: tuple[tuple[Kind, tuple[str, ...]], ...] = (
+            ("log", tuple(listing.logs)),
+            ("route", tuple(listing.routes)),
+        )
+        for kind, names in kinds:
+            choice = self._choice(kind)
+            keep = self._accepted[kind]
             choice.options = names or (NONE,)
             if keep in names:
-                show_value(choice, keep)
+                self._show(kind, keep)
+            else:
+                self._accepted[kind] = choice.value

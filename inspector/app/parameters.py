@@ -13,13 +13,11 @@ import viser
 from estimator.errors import RoutefuseError
 from estimator.params import ParamSpec, get_param, param_specs, params_to_toml
 from inspector.app.widgets import Event, show_value
-from inspector.controller import ProposedMethod, format_outages, parse_outages
+from inspector.controller import PROPOSED_METHODS, format_outages, parse_outages
 
 if TYPE_CHECKING:
     from inspector.app.view import ClientView
 
-PROPOSED_METHODS: tuple[ProposedMethod, ...] = ("proposed", "paper")
-"""the methods the 'method' dropdown offers (each compared with the baseline)"""
 GROUP_TITLES = {
     "trigger": "trigger",
     "window": "window",
@@ -107,6 +105,10 @@ class ParametersPanel:
                     widget.on_update(self._param_setter(spec.name))
                     self._widgets[spec.name] = widget
 
+    def widget(self, name: str) -> viser.GuiInputHandle[Any]:
+        """The control of a parameter by dotted name."""
+        return self._widgets[name]
+
     def _param_setter(self, name: str) -> Callable[[Event], None]:
         def set_value(event: Event) -> None:
             if event.client is None:
@@ -119,10 +121,7 @@ class ParametersPanel:
     def _on_method(self, event: Event) -> None:
         if event.client is None:
             return
-        chosen = self.method.value
-        for method in PROPOSED_METHODS:
-            if method == chosen:
-                self.view.guard(partial(self.controller.set_method, method))
+        self.view.guard(partial(self.controller.set_method, self.method.value))
 
     def _on_outages(self, event: Event) -> None:
         """Restart the quiet-period timer: the text is applied once the typing rests."""
@@ -151,7 +150,7 @@ class ParametersPanel:
             kept = format_outages(self.controller.outages) or "none"
             self.client.add_notification(
                 "GNSS outages not changed",
-                f"{exc} (kept: {kept})",
+                f"{str(exc)[:300]} (kept: {kept})",
                 color="red",
                 auto_close_seconds=12.0,
             )

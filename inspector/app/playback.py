@@ -13,8 +13,10 @@ from typing import TYPE_CHECKING, Any
 import numpy as np
 import viser
 
+from estimator.errors import RoutefuseError
 from inspector.app.widgets import Event, markdown_text, show_value
 from inspector.controller import Session, format_outages
+from inspector.timeline import PLAY_SPEEDS, parse_speed
 
 if TYPE_CHECKING:
     from inspector.app.view import ClientView
@@ -28,7 +30,6 @@ MATCH_BUTTONS = {
     "rejected ›": "rejected",
 }
 """the match navigation buttons and the :meth:`ClientView.jump` each makes"""
-SPEEDS = ("0.25x", "0.5x", "1x", "2x", "5x", "10x", "20x", "50x")
 NOTHING_LOADED = "**routefuse inspector** · nothing loaded (open a log in Files)"
 
 
@@ -91,7 +92,7 @@ class PlaybackPanel:
         )
         self.play_button = gui.add_button("play", hint="play / pause (space)")
         self.play_button.on_click(lambda _: view.toggle_play())
-        self.speed = gui.add_dropdown("speed", SPEEDS, initial_value="5x")
+        self.speed = gui.add_dropdown("speed", PLAY_SPEEDS, initial_value="5x")
         self.speed.on_update(self._on_speed)
         view.playhead.speed = 5.0
         self.follow_box = gui.add_checkbox("follow vehicle", False)
@@ -124,7 +125,19 @@ class PlaybackPanel:
     def _on_slider(self, event: Event) -> None:
         if event.client is None:
             return
-        self.view.seek(float(self.time_slider.value))
+        view = self.view
+        session = view.session
+        if session is None:
+            return
+        try:
+            t = session.timeline.checked_time(self.time_slider.value)
+        except RoutefuseError as exc:
+            view.notify_error(exc, "Refused")
+            show_value(
+                self.time_slider, float(np.clip(round(view.playhead.t, 3), 0, self.time_slider.max))
+            )
+            return
+        view.seek(t)
 
     def _pressed(
         self, group: viser.GuiButtonGroupHandle, actions: dict[str, Callable[[], None]]
@@ -140,7 +153,10 @@ class PlaybackPanel:
 
         async def on_click(event: Event) -> None:
             action = actions.get(group.value)
-            if action is None:
+            if action is None:  # a label no button has: only a misbehaving client sends one
+                self.view.notify_error(
+                    RoutefuseError(None, f"no button {str(group.value)[:40]!r}"), "Refused"
+                )
                 return
             with contextlib.suppress(RuntimeError):  # raised once the tab has closed
                 self.clicks.submit(action).add_done_callback(_report_failure)
@@ -148,7 +164,11 @@ class PlaybackPanel:
         return on_click
 
     def _on_speed(self, event: Event) -> None:
-        self.view.playhead.speed = float(self.speed.value.rstrip("x"))
+        try:
+            self.view.playhead.speed = parse_speed(self.speed.value)
+        except RoutefuseError as exc:
+            self.view.notify_error(exc, "Refused")
+            show_value(self.speed, f"{self.view.playhead.speed:g}x")
 
     def _on_follow(self, event: Event) -> None:
         self.view.follow = bool(self.follow_box.value)

@@ -39,6 +39,8 @@ NO_MORE = {
     "previous rejected": "no earlier rejected attempt",
 }
 """what a jump says when there is no attempt to go to"""
+MAX_NOTE = 300
+"""characters of a notification (a refused value may be any size)"""
 
 
 class ClientView:
@@ -88,7 +90,9 @@ class ClientView:
     # -- callbacks (thread pool) ----------------------------------------------------------
 
     def notify_error(self, exc: Exception, title: str = "Error") -> None:
-        self.client.add_notification(title, str(exc), color="red", auto_close_seconds=12.0)
+        text = str(exc)
+        text = text if len(text) <= MAX_NOTE else text[: MAX_NOTE - 1] + "…"
+        self.client.add_notification(title, text, color="red", auto_close_seconds=12.0)
 
     def guard(self, fn: Callable[[], Any]) -> None:
         """Run a request; a refused one is shown, and the panels show what is in effect."""

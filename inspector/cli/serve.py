@@ -174,6 +174,7 @@ def _listed_name(controller: Controller, path: Path, kind: str) -> str:
 
 
 def execute(args: argparse.Namespace) -> int:
+    from inspector.folders import exit_on_termination_signals
     from inspector.timeline import format_outages
 
     params = params_from_args(args)
@@ -185,6 +186,7 @@ def execute(args: argparse.Namespace) -> int:
             "open the logs under the data folders and upload files",
             file=sys.stderr,
         )
+    exit_on_termination_signals()  # SIGTERM / SIGHUP still remove the upload folder
     server, controller, app = start(
         host=args.host,
         port=args.port,
@@ -217,6 +219,8 @@ def execute(args: argparse.Namespace) -> int:
     )
     if controller.session is not None and not controller.busy:
         loaded(controller.session)
+    for warning in controller.folders.listing().warnings:
+        print(f"routefuse serve: warning: {warning[:300]}", file=sys.stderr, flush=True)
     try:
         while True:
             time.sleep(0.5)

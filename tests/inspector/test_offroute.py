@@ -87,10 +87,7 @@ def test_no_match_is_accepted_while_off_route_and_refusals_are_named(detour_sess
     assert not any(session.proposed.matches[i].accepted for i in during)
     for i, m in enumerate(session.proposed.matches):
         gate = off.refused[i]
-        assert (gate is not None) == (
-            not m.accepted
-            and m.failed_gates[0].gate.refuses_off_route
-        )
+        assert (gate is not None) == (not m.accepted and m.failed_gates[0].gate.refuses_off_route)
 
 
 def test_status_frame_label_panel_and_plot_say_off_route(detour_session):

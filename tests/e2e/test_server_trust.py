@@ -1,0 +1,132 @@
+"""Issue 16, items 3 and 5, over a real websocket: a client of the inspector's own origin that
+sends values no control offers, and an upload that lies about its size, changes nothing shared;
+a browser tab opened afterwards shows the session and the method in effect."""
+
+from __future__ import annotations
+
+import contextlib
+import threading
+import time
+from pathlib import Path
+
+import msgspec
+import pytest
+import viser
+from _browser import free_port
+from viser import _messages
+from websockets.sync.client import connect
+
+pytestmark = pytest.mark.e2e
+
+REPO = Path(__file__).resolve().parents[2]
+SAMPLE = REPO / "sample_logs" / "long_tunnel.mcap"
+UPLOAD_LIMIT = 1_000_000
+
+
+def _wait(predicate, timeout: float = 30.0, what: str = "condition"):
+    deadline = time.monotonic() + timeout
+    while time.monotonic() < deadline:
+        value = predicate()
+        if value:
+            return value
+        time.sleep(0.1)
+    raise AssertionError(f"timed out waiting for {what}")
+
+
+@pytest.fixture(scope="module")
+def inspector(tmp_path_factory):
+    from inspector.cli.serve import start
+
+    route = SAMPLE.with_name("long_tunnel.route.geojson")
+    if not (SAMPLE.exists() and route.exists()):
+        pytest.skip("the bundled long-tunnel sample is not in this checkout")
+    server, controller, app = start(
+        host="127.0.0.1",
+        port=free_port(),
+        data_dirs=[tmp_path_factory.mktemp("data")],
+        log=SAMPLE,
+        route=route,
+        max_upload_bytes=UPLOAD_LIMIT,
+    )
+    try:
+        assert controller.wait_idle(300), "the sample did not load"
+        assert controller.session is not None
+        yield server, controller, app
+    finally:
+        app.close()
+        controller.close()
+        server.stop()
+
+
+def _drain(ws) -> None:
+    """Read what the server sends, as a browser would (until the socket closes)."""
+    with contextlib.suppress(Exception):
+        while True:
+            ws.recv()
+
+
+def _send(ws, message: _messages.Message) -> None:
+    ws.send(msgspec.msgpack.encode(message.as_serializable_dict()))
+
+
+def test_a_misbehaving_client_changes_nothing_shared_and_a_new_tab_works(browser, inspector):
+    server, controller, app = inspector
+    url = f"ws://127.0.0.1:{server.get_port()}"
+    before = {v.client.client_id for v in app.views()}
+    params, session = controller.params, controller.session
+    with connect(
+        url,
+        origin=f"http://127.0.0.1:{server.get_port()}",
+        subprotocols=[f"viser-v{viser.__version__}"],
+        max_size=None,
+    ) as ws:
+        drain = threading.Thread(target=_drain, args=(ws,), daemon=True)
+        drain.start()
+        # viser counts a client as connected once it reports its camera, as a browser does
+        camera = _messages.ViewerCameraMessage(
+            (1.0, 0.0, 0.0, 0.0),
+            (0.0, 0.0, 10.0),
+            1.0,
+            0.1,
+            1000.0,
+            900,
+            1400,
+            (0.0, 0.0, 0.0),
+            (0.0, 0.0, 1.0),
+        )
+        _send(ws, camera)
+        view = _wait(
+            lambda: [v for v in app.views() if v.client.client_id not in before], 30, "its view"
+        )[0]
+        widget = view.parameters.widget
+        for handle, value in (
+            (view.parameters.method, "evil"),
+            (widget("sensors.gnss_lever_arm_m"), [float("nan"), 0.0, 0.0]),
+            (widget("sensors.initial_heading_deg"), "inf"),
+            (view.files.log_choice, "../../etc/passwd"),
+            (view.playback.speed, "nanx"),
+            (view.playback.time_slider, float("inf")),
+        ):
+            _send(ws, _messages.GuiUpdateMessage(handle._impl.uuid, {"value": value}))
+        uploads = view.client.gui._current_file_upload_states
+        upload = view.files.upload_log._impl.uuid
+        _send(ws, _messages.FileTransferStartUpload(upload, "lie", "x.mcap", "", 100, 1))
+        for i in range(3):
+            _send(ws, _messages.FileTransferPart(upload, "lie", i, b"\0" * 600_000))
+        _wait(lambda: view.parameters.method.value == "proposed", 10, "the method shown again")
+        _wait(lambda: "lie" not in uploads, 10, "the lying upload dropped")
+        time.sleep(1.0)
+        assert controller.params == params and controller.method == "proposed"
+        assert controller.session is session and not controller.busy
+        assert view.playback.speed.value == "5x" and view.playhead.speed == 5.0
+        assert list(controller.uploads.path.iterdir()) == []
+
+        page = browser.new_page(viewport={"width": 1400, "height": 900})
+        try:
+            page.set_default_timeout(90_000)
+            page.goto(f"http://127.0.0.1:{server.get_port()}")
+            _wait(lambda: "match attempts" in page.inner_text("body"), 60, "the session")
+            page.get_by_role("tab", name="Parameters").click()
+            _wait(lambda: page.locator("input[value='proposed']").count(), 10, "the method")
+        finally:
+            page.close()
