@@ -154,14 +154,21 @@ def start(
     server = viser.ViserServer(host=host, port=port, verbose=verbose)
     app = InspectorApp(server, controller)
     if log is not None and route is not None:
-        controller.open(
-            log,
-            route,
-            log_name=_listed_name(controller, log, "log"),
-            route_name=_listed_name(controller, route, "route"),
-            outages=outages,
-        )
+        open_first(controller, log, route, outages)
     return server, controller, app
+
+
+def open_first(
+    controller: Controller, log: Path, route: Path, outages: Sequence[tuple[float, float]] = ()
+) -> None:
+    """Start loading the log given on the command line (with the outages injected into it)."""
+    controller.open(
+        log,
+        route,
+        log_name=_listed_name(controller, log, "log"),
+        route_name=_listed_name(controller, route, "route"),
+        outages=outages,
+    )
 
 
 def _listed_name(controller: Controller, path: Path, kind: str) -> str:
@@ -175,7 +182,7 @@ def _listed_name(controller: Controller, path: Path, kind: str) -> str:
 
 def execute(args: argparse.Namespace) -> int:
     from inspector.folders import exit_on_termination_signals
-    from inspector.timeline import format_outages
+    from inspector.timeline import format_outages, normalise_outages
 
     params = params_from_args(args)
     outages = tuple(parse_outage(o) for o in args.outage)
@@ -191,8 +198,6 @@ def execute(args: argparse.Namespace) -> int:
         host=args.host,
         port=args.port,
         data_dirs=args.data_dir,
-        log=log,
-        route=route,
         params=params,
         method=args.method,
         outages=outages,
@@ -201,7 +206,9 @@ def execute(args: argparse.Namespace) -> int:
     )
     shown = "127.0.0.1" if args.host in ("0.0.0.0", "::") else args.host
     print(f"routefuse inspector: http://{shown}:{server.get_port()}  (Ctrl+C to stop)", flush=True)
-    injected = f" and GNSS outages {format_outages(controller.outages)} s" if outages else ""
+    injected = (
+        f" and GNSS outages {format_outages(normalise_outages(outages))} s" if outages else ""
+    )
     print(f"loading {log.name} with route {route.name}{injected} ...", flush=True)
 
     def loaded(session: Session) -> None:
@@ -217,8 +224,7 @@ def execute(args: argparse.Namespace) -> int:
         on_session=loaded,
         on_error=lambda exc: print(f"routefuse: error: {exc}", file=sys.stderr, flush=True),
     )
-    if controller.session is not None and not controller.busy:
-        loaded(controller.session)
+    open_first(controller, log, route, outages)  # after subscribing: an early failure prints
     for warning in controller.folders.listing().warnings:
         print(f"routefuse serve: warning: {warning[:300]}", file=sys.stderr, flush=True)
     try:

@@ -70,6 +70,7 @@ def test_without_host_the_server_listens_on_loopback_only_and_does_not_warn(tmp_
     assert serve.execute(args) == 0
     _, err = capsys.readouterr()
     assert "warning: binding" not in err
+    assert f"routefuse: error: {log}" in err, "the failed first load was not reported"
     assert seen["addresses"], "the server was not listening"
     assert seen["addresses"] <= {"127.0.0.1", "::1"}, seen["addresses"]
 

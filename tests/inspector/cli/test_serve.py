@@ -7,6 +7,7 @@ import socket
 import threading
 import time
 import urllib.request
+from types import SimpleNamespace
 
 import pytest
 
@@ -97,20 +98,25 @@ def test_outages_reach_the_server_and_the_status_line(tmp_path, capsys, monkeypa
     log = tmp_path / "drive.mcap"
     log.write_bytes(b"x")
     (tmp_path / "drive.route.geojson").write_text("{}")
-    started: list = []
+    opened: list = []
+    controller = SimpleNamespace(subscribe=lambda **_: None)
 
     def fake_start(**kw):
-        started.append(kw)
+        return SimpleNamespace(get_port=lambda: 1), controller, None
+
+    def fake_open_first(ctl, log_path, route_path, outages):
+        opened.append((ctl, log_path, outages))
         raise RoutefuseError(None, "stop here")
 
     monkeypatch.setattr(serve, "start", fake_start)
+    monkeypatch.setattr(serve, "open_first", fake_open_first)
     args = build_parser().parse_args(
         ["serve", str(log), "--outage", "90:120", "--outage", "30:60.5"]
     )
     with pytest.raises(RoutefuseError, match="stop here"):
         serve.execute(args)
-    assert started[0]["outages"] == ((90.0, 120.0), (30.0, 60.5))
-    assert started[0]["log"] == log.resolve()
+    assert opened == [(controller, log.resolve(), ((90.0, 120.0), (30.0, 60.5)))]
+    assert "GNSS outages 30:60.5, 90:120 s" in capsys.readouterr().out
 
 
 SAMPLE = serve.SAMPLE_LOGS / "long_tunnel.mcap"
