@@ -36,6 +36,9 @@ class FitSettings:
     step_m: float
     deltas: F64
     """along-track offsets the scan tries, m"""
+    grid_ratio: int
+    """the window spacing in search steps when the offsets are a grid the pairs can share
+    (:func:`~estimator.matching.kernels._scan_grid`), else 0"""
     shape_noise_m: float
     along_sigma_max_m: float
     along_sigma_min_m: float
@@ -61,12 +64,22 @@ def _settings(params: Params) -> FitSettings:
     else:
         deltas = np.zeros(1)
     deltas.setflags(write=False)
+    h = w.spacing_m
+    ratio = int(np.rint(h / step))
+    grid = (
+        ext.along_track_search
+        and len(deltas) > 1
+        and ratio >= 1
+        and abs(ratio * step - h) <= 1e-12 * h
+        and abs(deltas[1] - deltas[0] - step) <= 1e-12 * step
+    )
     return FitSettings(
         spacing_m=w.spacing_m,
         along_search=ext.along_track_search,
         geometry_covariance=ext.geometry_covariance,
         step_m=step,
         deltas=deltas,
+        grid_ratio=ratio if grid else 0,
         shape_noise_m=po.shape_noise_m,
         along_sigma_max_m=po.along_sigma_max_m,
         along_sigma_min_m=po.along_sigma_min_m,
@@ -114,6 +127,7 @@ def fit_window(
     settings: FitSettings,
     *,
     pointwise_residual: bool = False,
+    grid_scan: bool = False,
 ) -> Fit | None:
     """Register the window (resampled, (N, 2)) to ``road``, its first point at about arc
     length ``s_anchor``; the pseudo-position is moved ``lane_offset`` to the left of the road.
@@ -122,7 +136,11 @@ def fit_window(
     ``pointwise_residual``: the residual summed pair by pair
     (:func:`~estimator.matching.kernels.rms_residual`), exact to the last digits a table
     prints, instead of from the Kabsch sums, whose rounding the candidate's results (its
-    covariance, the filter) were made with; the rivals, scored only, use it."""
+    covariance, the filter) were made with; the rivals, scored only, use it.
+
+    ``grid_scan``: the along-track search on a grid the pairs share
+    (``FitSettings.grid_ratio``), half the direct scan's time (23 vs 45 us) and equal to it to
+    rounding; the rivals, scored only, use it, as the compiled rival score did."""
     n = len(win)
     s = np.empty(n)
     valid = np.empty(n, np.bool_)
@@ -140,6 +158,7 @@ def fit_window(
         settings.shape_noise_m,
         settings.along_sigma_max_m,
         settings.along_sigma_min_m,
+        settings.grid_ratio if grid_scan else 0,
         s,
         valid,
         q,
@@ -148,7 +167,7 @@ def fit_window(
     n_pairs = len(idx)
     if n_pairs < 2:
         return None
-    rot, trans, ms = _kabsch(win, q, valid.astype(np.float64))
+    rot, trans, ms = _kabsch(win, q, valid.astype(np.float64), with_residual=not pointwise_residual)
     residual = rms_residual(win, q, valid, rot) if pointwise_residual else float(np.sqrt(ms))
     i1, i0 = idx[-1], idx[-2]
     d_s = win[i1] - win[i0]
@@ -191,8 +210,9 @@ def _observation_cov(
     residual (``geometry_covariance``); else isotropic."""
     if settings.geometry_covariance:
         cross = max(settings.cross_sigma_m, settings.cross_residual_factor * residual)
-        basis = np.column_stack([tangent, normal])
-        cov: F64 = basis @ np.diag([along_sigma**2, cross**2]) @ basis.T
+        basis = np.array([[tangent[0], normal[0]], [tangent[1], normal[1]]])
+        scale = np.array([[along_sigma**2, 0.0], [0.0, cross**2]])
+        cov: F64 = basis @ scale @ basis.T
         return cov
     return settings.sigma_m**2 * np.eye(2)
 
@@ -228,9 +248,10 @@ def kabsch_2d(src: ArrayLike, dst: ArrayLike, weights: ArrayLike | None = None) 
     return rot, trans
 
 
-def _kabsch(src: F64, dst: F64, w: F64) -> tuple[F64, F64, float]:
+def _kabsch(src: F64, dst: F64, w: F64, *, with_residual: bool = True) -> tuple[F64, F64, float]:
     """Weighted Kabsch of one (n, 2) pair of point sets: R, t and the weighted mean squared
-    residual (from sum w |R a - b|^2 = sum w |a|^2 + sum w |b|^2 - 2 tr(R C))."""
+    residual (from sum w |R a - b|^2 = sum w |a|^2 + sum w |b|^2 - 2 tr(R C)); NaN without
+    ``with_residual`` (a caller that sums the residual pair by pair)."""
     wsum = max(float(w.sum()), 1e-300)
     w2 = w[:, None]
     cs = (w2 * src).sum(axis=0) / wsum
@@ -246,6 +267,8 @@ def _kabsch(src: F64, dst: F64, w: F64) -> tuple[F64, F64, float]:
         v[:, 1] *= -1.0
         r = v @ u.T
     trans = ct - r @ cs
+    if not with_residual:
+        return r, trans, float("nan")
     sq = float((aw * a).sum() + (w2 * b * b).sum())
     tr = float(np.einsum("ij,ji->", r, cov))
     return r, trans, max(sq - 2.0 * tr, 0.0) / wsum

@@ -6,7 +6,8 @@ and reversed rivals); in numpy the along-track search and the pairing cost some 
 small-array calls per fit, which made the matcher the run's bottleneck (profiles in
 ``docs/performance.md``). Each kernel computes bit for bit what the numpy code it replaced
 did (the same operations in the same order), so a run's results do not change;
-``tests/estimator/matching/test_kernels.py`` compares each with a numpy oracle.
+``tests/estimator/matching/test_match_kernels.py`` compares each with a numpy oracle (the
+rivals' grid scan, :func:`_scan_grid`, equals the direct scan to rounding only).
 """
 
 from __future__ import annotations
@@ -152,6 +153,69 @@ def scan_offsets(
 
 
 @njit(cache=True)
+def _scan_grid(
+    win: F64,
+    rxy: F64,
+    rs: F64,
+    runit: F64,
+    s0: float,
+    step: float,
+    k_n: int,
+    ratio: int,
+    ms: F64,
+    m: F64,
+) -> None:
+    """The along-track scan (:func:`scan_offsets`) of ``k_n`` offsets ``step`` apart from
+    ``s0`` when the window spacing is ``ratio`` grid steps: every pair lies on the grid
+    s0 + step * g, so each route point is interpolated once instead of once per offset. Equal
+    to the direct scan to rounding (the arc lengths are summed in another order), so only the
+    rivals, which are scored and never applied, use it."""
+    n = win.shape[0]
+    nseg = rxy.shape[0] - 1
+    length = rs[nseg]
+    n_grid = k_n + ratio * (n - 1)
+    gx = np.empty(n_grid)
+    gy = np.empty(n_grid)
+    ok = np.empty(n_grid, np.bool_)
+    ox, oy = win[0, 0], win[0, 1]
+    j = segment_index(rs, s0)
+    for g in range(n_grid):
+        s = s0 + step * g
+        ok[g] = s >= -1e-6 and s <= length + 1e-6
+        while j < nseg - 1 and rs[j + 1] <= s:
+            j += 1
+        f = (s - rs[j]) / (rs[j + 1] - rs[j])
+        gx[g] = rxy[j, 0] + f * (rxy[j + 1, 0] - rxy[j, 0]) - ox
+        gy[g] = rxy[j, 1] + f * (rxy[j + 1, 1] - rxy[j, 1]) - oy
+    for k in range(k_n):
+        sw = 0.0
+        sax = say = sbx = sby = 0.0
+        saa = sbb = c00 = c01 = c10 = c11 = 0.0
+        for i in range(n):
+            g = k + ratio * i
+            if not ok[g]:
+                continue
+            qx, qy = gx[g], gy[g]
+            px = win[i, 0] - ox
+            py = win[i, 1] - oy
+            sw += 1.0
+            sax += px
+            say += py
+            sbx += qx
+            sby += qy
+            saa += px * px + py * py
+            sbb += qx * qx + qy * qy
+            c00 += px * qx
+            c01 += px * qy
+            c10 += py * qx
+            c11 += py * qy
+        m[k] = sw
+        ms[k] = (
+            np.inf if sw < 3 else _rigid_msr(sw, sax, say, sbx, sby, saa, sbb, c00, c01, c10, c11)
+        )
+
+
+@njit(cache=True)
 def along_track_pairs(
     win: F64,
     rxy: F64,
@@ -165,6 +229,7 @@ def along_track_pairs(
     shape_noise: float,
     sigma_max: float,
     sigma_min: float,
+    grid_ratio: int,
     s_out: F64,
     valid_out: NDArray[np.bool_],
     q_out: F64,
@@ -177,11 +242,16 @@ def along_track_pairs(
     residual that is flat on a constant bend); without, the centre offset and the curvature
     there. Fills the pairs at the chosen offset (:func:`pair_points`) and returns (offset,
     curvature, 1-sigma, observed): an along-track sigma of ``sigma_max`` or more is
-    unobserved (offset 0, sigma ``sigma_max``), a smaller one is floored at ``sigma_min``."""
+    unobserved (offset 0, sigma ``sigma_max``), a smaller one is floored at ``sigma_min``.
+    ``grid_ratio`` > 0: the deltas are a grid ``step`` apart and the spacing is that many
+    steps, scanned by :func:`_scan_grid`; 0: the direct scan."""
     nd = deltas.shape[0]
     ms = np.empty(nd)
     m = np.empty(nd)
-    scan_offsets(win, rxy, rs, s_anchor, deltas, spacing, ms, m)
+    if grid_ratio > 0:
+        _scan_grid(win, rxy, rs, runit, s_anchor + deltas[0], step, nd, grid_ratio, ms, m)
+    else:
+        scan_offsets(win, rxy, rs, s_anchor, deltas, spacing, ms, m)
     offset, curvature, sigma = 0.0, 0.0, np.inf
     k = nd // 2
     if search:

@@ -82,7 +82,9 @@ def fit_rivals(
         if piece is None:
             continue
         anchor = piece.arc_of(win[0])
-        fit = fit_window(win, p_dr, piece, anchor, z_lane, settings, pointwise_residual=True)
+        fit = fit_window(
+            win, p_dr, piece, anchor, z_lane, settings, pointwise_residual=True, grid_scan=True
+        )
         if fit is None:
             continue
         cost = fit_cost(fit, p_dr, cov, settings)

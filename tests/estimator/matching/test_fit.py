@@ -218,6 +218,7 @@ def test_rivals_are_the_fit_on_their_pieces(seed, change):
                 0.0 if lane_path else lane,
                 settings_,
                 pointwise_residual=True,
+                grid_scan=True,
             )
             if fit is not None:
                 want.append((piece_at.rival, fit))

@@ -317,7 +317,7 @@ def test_along_track_search_is_the_python_search_bit_for_bit(seed, change):
         got = along_track_pairs(
             win, road.xy, road.s, road.unit, s0, settings.deltas, settings.along_search,
             settings.step_m, h, settings.shape_noise_m, settings.along_sigma_max_m,
-            settings.along_sigma_min_m, s, valid, q,
+            settings.along_sigma_min_m, 0, s, valid, q,
         )  # fmt: skip
         want = ref_along_track(win, road, s0, settings)
         assert got == want
@@ -325,6 +325,45 @@ def test_along_track_search_is_the_python_search_bit_for_bit(seed, change):
         pair_points(win, road.xy, road.s, road.unit, s0 + want[0], h, s2, valid2, q2)
         np.testing.assert_array_equal(q, q2)
         np.testing.assert_array_equal(valid, valid2)
+
+
+@pytest.mark.parametrize("seed", range(15))
+@pytest.mark.parametrize(
+    "change", [{}, {"window.spacing_m": 3.5, "window.along_search_step_m": 0.7}]
+)
+def test_grid_scan_is_the_direct_scan_to_rounding(seed, change):
+    """The rivals' along-track search on the shared grid finds the direct scan's offset."""
+    rng = np.random.default_rng(seed)
+    settings = FitSettings.of(with_values(Params(), change))
+    assert settings.grid_ratio == round(settings.spacing_m / settings.step_m)
+    route = Route(_random_polyline(rng, 200))
+    road = Polyline.of(route)
+    h = settings.spacing_m
+    for _ in range(5):
+        s0 = float(rng.uniform(-30.0, route.length - 50.0))
+        n = int(rng.integers(2, 80))
+        win = route.point_at(s0 + h * np.arange(n)) + rng.normal(0, rng.choice([0.01, 1.0]), (n, 2))
+        got = []
+        for ratio in (settings.grid_ratio, 0):
+            s, valid, q = np.empty(n), np.empty(n, np.bool_), np.empty((n, 2))
+            found = along_track_pairs(
+                win, road.xy, road.s, road.unit, s0, settings.deltas, settings.along_search,
+                settings.step_m, h, settings.shape_noise_m, settings.along_sigma_max_m,
+                settings.along_sigma_min_m, ratio, s, valid, q,
+            )  # fmt: skip
+            got.append((found, valid, q))
+        (grid, valid_g, q_g), (direct, valid_d, q_d) = got
+        assert grid[3] == direct[3]
+        np.testing.assert_allclose(grid[:3], direct[:3], rtol=1e-6, atol=1e-6)
+        np.testing.assert_array_equal(valid_g, valid_d)
+        np.testing.assert_allclose(q_g, q_d, rtol=0, atol=1e-6)
+
+
+def test_grid_scan_needs_a_shared_grid():
+    no_search = {"extensions.along_track_search": False}
+    assert FitSettings.of(with_values(Params(), no_search)).grid_ratio == 0
+    off_grid = {"window.spacing_m": 5.0, "window.along_search_step_m": 0.3}
+    assert FitSettings.of(with_values(Params(), off_grid)).grid_ratio == 0
 
 
 @pytest.mark.parametrize("seed", range(30))
