@@ -96,8 +96,12 @@ def is_log_path(path: str | Path) -> bool:
 def open_log_path(path: Path) -> tuple[LogReader, Path]:
     """The format of ``path`` and what it reads, or a one-line :class:`LogError` saying why
     this is not a log."""
-    if not path.exists():
-        raise LogError(path, "no such file or folder")
+    try:
+        path.stat()
+    except FileNotFoundError:
+        raise LogError(path, "no such file or folder") from None
+    except OSError as exc:
+        raise LogError(path, f"cannot open it ({exc.strerror or exc})") from None
     for fmt in LOG_FORMATS.values():
         source = fmt.locate(path)
         if source is not None:

@@ -6,11 +6,13 @@ rosbags' ``AnyReader`` (:mod:`estimator.io.decode`) and are repaired alike
 from __future__ import annotations
 
 import contextlib
+import stat
 from collections.abc import Callable, Iterator
 from pathlib import Path
 from typing import TYPE_CHECKING, Any
 
 from estimator.errors import LogError
+from estimator.io.bounds import check_decompressed_size
 from estimator.io.topics import TopicChoice, topic_roles
 
 if TYPE_CHECKING:
@@ -64,7 +66,10 @@ def _reading(path: Path, kind: str) -> Iterator[None]:
 
 def _starts_with(path: Path, magic: bytes, kind: str) -> Path:
     """``path`` if it is a non-empty file that starts with ``magic``, else a LogError."""
-    if path.stat().st_size == 0:
+    info = path.stat()
+    if not stat.S_ISREG(info.st_mode):
+        raise LogError(path, "not a regular file (a fifo or a device is not read)")
+    if info.st_size == 0:
         raise LogError(path, "file is empty")
     try:
         with path.open("rb") as fh:
@@ -92,6 +97,7 @@ class _RosbagsLog:
     def topics(self, path: Path, source: Path) -> dict[str, tuple[str, int]]:
         from rosbags.highlevel import AnyReader
 
+        check_decompressed_size(source)
         out: dict[str, tuple[str, int]] = {}
         with _reading(path, self.kind), AnyReader([source]) as reader:
             for conn in reader.connections:
@@ -111,6 +117,7 @@ class _RosbagsLog:
         from estimator.io.decode import decode
         from estimator.io.repair import assemble
 
+        check_decompressed_size(source)
         reader: Any
         with _reading(path, self.kind), AnyReader([source]) as reader:
             types: dict[str, str] = {}

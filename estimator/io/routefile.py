@@ -1,9 +1,9 @@
 """Read a mission route from GeoJSON, GPX, KML or CSV into a :class:`Route` in the session's ENU
 frame.
 
-Standard library only. XML files are refused when they declare a DOCTYPE or ENTITY: GPX and KML
-never need one, and refusing them before parsing rules out entity-expansion attacks without a
-hardened parser.
+GPX and KML are parsed by defusedxml with DTDs and entities forbidden at the parser (a text
+filter for '<!DOCTYPE' was bypassed by UTF-16 without a byte-order mark), in UTF-8 only, and a
+route file's cost is bounded: bytes, points, XML elements and nesting.
 """
 
 from __future__ import annotations
@@ -12,6 +12,7 @@ import csv
 import io
 import json
 import re
+import stat
 import xml.etree.ElementTree as ET
 from dataclasses import dataclass
 from pathlib import Path
@@ -30,6 +31,14 @@ F64 = NDArray[np.float64]
 MAX_ROUTE_BYTES = 50_000_000
 """Route files are read whole; a larger file is refused before it is read (a 1000 km route at
 one vertex per metre is about 40 MB of GeoJSON)."""
+MAX_ROUTE_POINTS = 2_000_000
+"""Points in all the lines of a route file together (2000 km at one vertex per metre)."""
+MAX_XML_DEPTH = 64
+"""GPX and KML nest a few levels (KML folders a few more)."""
+MAX_XML_ELEMENTS = 4_000_000
+"""Elements of a GPX or KML file: each costs memory in the parsed tree."""
+MAX_LISTED_LINES = 12
+"""Lines named in a message; the rest are counted."""
 
 
 @dataclass(frozen=True)
@@ -70,12 +79,18 @@ def _candidates(p: Path) -> list[_Candidate]:
             p, f"unknown route format '{p.suffix or p.name}': expected {ROUTE_SUFFIXES_TEXT}"
         )
     text = _read_text(p)
-    return {
+    cands = {
         "geojson": _geojson_lines,
         "gpx": _gpx_lines,
         "kml": _kml_lines,
         "csv": _csv_lines,
     }[fmt](p, text)
+    total = sum(len(c.points) for c in cands)
+    if total > MAX_ROUTE_POINTS:
+        raise RouteError(
+            p, f"route file has {total} points; more than {MAX_ROUTE_POINTS} are refused"
+        )
+    return cands
 
 
 def _to_line(p: Path, chosen: _Candidate) -> RouteLine:
@@ -117,11 +132,17 @@ def route_in_frame(line: RouteLine, frame: LocalFrame) -> Route:
 
 
 def _read_text(p: Path) -> str:
-    if not p.exists():
-        raise RouteError(p, "no such file")
-    if p.is_dir():
+    try:
+        info = p.stat()
+    except FileNotFoundError:
+        raise RouteError(p, "no such file") from None
+    except OSError as exc:
+        raise RouteError(p, f"cannot read the file ({exc.strerror or exc})") from None
+    if stat.S_ISDIR(info.st_mode):
         raise RouteError(p, "is a folder, expected a route file")
-    size = p.stat().st_size
+    if not stat.S_ISREG(info.st_mode):
+        raise RouteError(p, "not a regular file, expected a route file")
+    size = info.st_size
     if size > MAX_ROUTE_BYTES:
         raise RouteError(
             p,
@@ -164,8 +185,15 @@ def _choose(p: Path, cands: list[_Candidate], feature: str | int | None) -> _Can
 
 
 def _listing(cands: list[_Candidate]) -> str:
-    names = ", ".join(f"{i}: {c.name or '(unnamed)'}" for i, c in enumerate(cands))
-    return f"{len(cands)} lines ({names})"
+    names = ", ".join(
+        f"{i}: {_short(c.name) or '(unnamed)'}" for i, c in enumerate(cands[:MAX_LISTED_LINES])
+    )
+    more = f", ... {len(cands) - MAX_LISTED_LINES} more" if len(cands) > MAX_LISTED_LINES else ""
+    return f"{len(cands)} lines ({names}{more})"
+
+
+def _short(text: str, limit: int = 60) -> str:
+    return text if len(text) <= limit else text[: limit - 3] + "..."
 
 
 def _num(value: Any) -> float:
@@ -236,16 +264,44 @@ def _geojson_geometry(p: Path, geom: Any) -> list[tuple[float, float, float]] | 
 
 # --- XML: GPX and KML ------------------------------------------------------------------------
 
-_UNSAFE_XML = re.compile(r"<!\s*(DOCTYPE|ENTITY)", re.IGNORECASE)
+_XML_ENCODING = re.compile(r"""^\s*<\?xml[^>]*?\bencoding\s*=\s*["']([^"']*)["']""")
 
 
 def _parse_xml(p: Path, text: str, kind: str) -> ET.Element:
-    if _UNSAFE_XML.search(text):
-        raise RouteError(p, f"{kind} file declares a DOCTYPE or ENTITY; refused for safety")
+    from defusedxml import DefusedXmlException
+    from defusedxml.ElementTree import iterparse
+
+    if "\0" in text:
+        raise RouteError(p, f"{kind} file is not UTF-8 (it holds NUL bytes: UTF-16?)")
+    declared = _XML_ENCODING.match(text)
+    if declared and declared.group(1).strip().lower().replace("_", "-") not in ("utf-8", "utf8"):
+        raise RouteError(
+            p, f"{kind} file declares encoding {_short(declared.group(1))!r}; only UTF-8 is read"
+        )
+    depth = elements = 0
+    root: ET.Element | None = None
     try:
-        return ET.fromstring(text.encode("utf-8"))
+        for event, el in iterparse(
+            io.BytesIO(text.encode("utf-8")), events=("start", "end"), forbid_dtd=True
+        ):
+            if event == "end":
+                depth -= 1
+                continue
+            root = el if root is None else root
+            depth, elements = depth + 1, elements + 1
+            if depth > MAX_XML_DEPTH:
+                raise RouteError(p, f"{kind} elements nested over {MAX_XML_DEPTH} deep; refused")
+            if elements > MAX_XML_ELEMENTS:
+                raise RouteError(p, f"{kind} file has over {MAX_XML_ELEMENTS} elements; refused")
+    except DefusedXmlException as exc:
+        raise RouteError(
+            p, f"{kind} file declares a DOCTYPE or ENTITY; refused for safety ({exc})"
+        ) from None
     except ET.ParseError as exc:
-        raise RouteError(p, f"not valid {kind} XML ({exc})") from None
+        raise RouteError(p, f"not valid {kind} XML ({_short(str(exc), 120)})") from None
+    if root is None:
+        raise RouteError(p, f"not valid {kind} XML (no element)")
+    return root
 
 
 def _local(tag: Any) -> str:
@@ -311,7 +367,12 @@ def _csv_lines(p: Path, text: str) -> list[_Candidate]:
         dialect = csv.Sniffer().sniff(text[:4096], delimiters=",;\t")
     except csv.Error:
         dialect = csv.excel
-    rows = [r for r in csv.reader(io.StringIO(text), dialect) if any(c.strip() for c in r)]
+    try:
+        rows = [r for r in csv.reader(io.StringIO(text), dialect) if any(c.strip() for c in r)]
+    except csv.Error as exc:
+        raise RouteError(p, f"not a readable CSV route ({_short(str(exc), 120)})") from None
+    if not rows:
+        raise RouteError(p, "CSV has no header and no rows (only separators or quotes)")
     header = [c.strip().lower() for c in rows[0]]
 
     def column(names: tuple[str, ...]) -> int | None:
@@ -321,8 +382,8 @@ def _csv_lines(p: Path, text: str) -> list[_Candidate]:
     if i_lat is None or i_lon is None:
         raise RouteError(
             p,
-            f"CSV header {rows[0]!r} has no lat/lon columns; expected a header with lat,lon[,alt] "
-            "or latitude,longitude",
+            f"CSV header {_short(repr(rows[0]))} has no lat/lon columns; expected a header "
+            "with lat,lon[,alt] or latitude,longitude",
         )
     pts = []
     for k, row in enumerate(rows[1:], start=2):

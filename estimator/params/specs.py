@@ -5,6 +5,9 @@ type, bounds and choices its declaration gives."""
 from __future__ import annotations
 
 import dataclasses
+import difflib
+import math
+import stat
 import tomllib
 from collections.abc import Iterator
 from dataclasses import dataclass, fields, is_dataclass, replace
@@ -75,8 +78,9 @@ def _spec(name: str) -> ParamSpec:
     for s in param_specs():
         if s.name == name:
             return s
-    known = ", ".join(s.name for s in param_specs())
-    raise ConfigError(None, f"unknown parameter {name!r} (known: {known})")
+    close = difflib.get_close_matches(name, [s.name for s in param_specs()], n=3)
+    hint = f"did you mean {', '.join(close)}?" if close else "see routefuse run --help"
+    raise ConfigError(None, f"unknown parameter {_short(repr(name))} ({hint})")
 
 
 def coerce_value(spec: ParamSpec, value: Any, source: str | None = None) -> Any:
@@ -103,21 +107,39 @@ def coerce_value(spec: ParamSpec, value: Any, source: str | None = None) -> Any:
             out = tuple(float(v) for v in items)
             if len(out) != len(spec.default):
                 raise ValueError(f"expected {len(spec.default)} numbers")
+            for item in out:
+                _check_number(spec, item, where)
             return out
         else:
             out = str(value)
     except (TypeError, ValueError) as exc:
-        raise ConfigError(where, f"{spec.name}: invalid value {value!r} ({exc})") from None
-    if isinstance(out, float) and out != out:
-        raise ConfigError(where, f"{spec.name}: NaN is not a valid value")
+        raise ConfigError(
+            where, f"{spec.name}: invalid value {_short(repr(value))} ({_short(str(exc))})"
+        ) from None
     if spec.choices and out not in spec.choices:
-        raise ConfigError(where, f"{spec.name}: {out!r} is not one of {spec.choices}")
-    number = isinstance(out, int | float) and not isinstance(out, bool)
-    too_low = number and spec.lo is not None and out < spec.lo
-    too_high = number and spec.hi is not None and out > spec.hi
-    if too_low or too_high:
-        raise ConfigError(where, f"{spec.name}={out} is outside [{spec.lo}, {spec.hi}]")
+        raise ConfigError(where, f"{spec.name}: {_short(repr(out))} is not one of {spec.choices}")
+    if isinstance(out, int | float) and not isinstance(out, bool):
+        _check_number(spec, out, where)
     return out
+
+
+MAX_MAGNITUDE = 1e9
+"""Bound of a number without declared bounds (a tuple's items: a lever arm in metres)."""
+
+
+def _check_number(spec: ParamSpec, value: float, where: str) -> None:
+    if value != value:
+        raise ConfigError(where, f"{spec.name}: NaN is not a valid value (not a finite number)")
+    if not math.isfinite(value):
+        raise ConfigError(where, f"{spec.name}: {value} is not a finite number")
+    lo = spec.lo if spec.lo is not None else (-MAX_MAGNITUDE if spec.type is not int else None)
+    hi = spec.hi if spec.hi is not None else (MAX_MAGNITUDE if spec.type is not int else None)
+    if (lo is not None and value < lo) or (hi is not None and value > hi):
+        raise ConfigError(where, f"{spec.name}={value} is outside [{lo}, {hi}]")
+
+
+def _short(text: str, limit: int = 80) -> str:
+    return text if len(text) <= limit else text[: limit - 3] + "..."
 
 
 def with_values(params: Params, values: dict[str, Any], source: str | None = None) -> Params:
@@ -145,10 +167,20 @@ def parse_assignments(items: list[str]) -> dict[str, str]:
     return out
 
 
+MAX_CONFIG_BYTES = 1_000_000
+"""A parameter file is a few kB; nothing larger (or not a regular file: a fifo, /dev/zero) is
+read."""
+
+
 def load_params(path: str | Path, base: Params | None = None) -> Params:
     """Parameters from a TOML file (tables named like the groups; unknown keys are errors)."""
     path = Path(path)
     try:
+        info = path.stat()
+        if not stat.S_ISREG(info.st_mode):
+            raise ConfigError(path, "not a regular file; a config is a TOML file")
+        if info.st_size > MAX_CONFIG_BYTES:
+            raise ConfigError(path, f"config is {info.st_size} bytes; over {MAX_CONFIG_BYTES}")
         data = tomllib.loads(path.read_text(encoding="utf-8"))
     except OSError as exc:
         raise ConfigError(path, f"cannot read config: {exc.strerror or exc}") from None

@@ -4,6 +4,7 @@ log-loading options."""
 from __future__ import annotations
 
 import argparse
+import math
 from typing import Any
 
 from estimator.errors import ConfigError
@@ -79,7 +80,12 @@ def parse_outage(text: str) -> tuple[float, float]:
     try:
         a, b = (float(x) for x in text.split(":"))
     except ValueError:
-        raise ConfigError("--outage", f"{text!r} is not START:END in seconds") from None
+        raise ConfigError("--outage", f"{text[:60]!r} is not START:END in seconds") from None
+    shown = text if len(text) <= 60 else text[:57] + "..."
+    if not (math.isfinite(a) and math.isfinite(b)):
+        raise ConfigError("--outage", f"{shown!r}: START and END must be finite numbers")
+    if a < 0 or b < 0:
+        raise ConfigError("--outage", f"{shown!r}: negative times; seconds after the log start")
     if not b > a:
-        raise ConfigError("--outage", f"{text!r}: END must be after START")
+        raise ConfigError("--outage", f"{shown!r}: END must be after START")
     return a, b

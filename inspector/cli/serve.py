@@ -3,6 +3,10 @@
 from __future__ import annotations
 
 import argparse
+import errno
+import ipaddress
+import math
+import socket
 import sys
 import time
 from collections.abc import Sequence
@@ -98,8 +102,12 @@ def resolve_inputs(log: str | None, route: str | None) -> tuple[Path, Path]:
         log_path = SAMPLE_LOGS / f"{DEFAULT_SAMPLE}.mcap"
     else:
         log_path = Path(log).expanduser()
-        if not log_path.exists():
-            raise RoutefuseError(log_path, "no such file or folder")
+        try:
+            log_path.stat()
+        except FileNotFoundError:
+            raise RoutefuseError(log_path, "no such file or folder") from None
+        except OSError as exc:
+            raise RoutefuseError(log_path, f"cannot open it ({exc.strerror or exc})") from None
     if route is None:
         found = route_beside(log_path)
         if found is None:
@@ -110,6 +118,37 @@ def resolve_inputs(log: str | None, route: str | None) -> tuple[Path, Path]:
         if not route_path.is_file():
             raise RoutefuseError(route_path, "no such file")
     return log_path.resolve(), route_path.resolve()
+
+
+MAX_UPLOAD_MB = 100_000.0
+"""--max-upload-mb beyond this (100 GB) is a typo."""
+
+
+def check_listen_address(host: str, port: int) -> None:
+    """A one-line error for an address the server cannot listen on: viser printed a traceback
+    for a port out of range and then waited forever, and retried an invalid address forever.
+    A port in use is left to viser, which moves to the next free one."""
+    if not 0 <= port <= 65535:
+        raise RoutefuseError("--port", f"{port} is outside [0, 65535]")
+    if host and all(c.isdigit() or c == "." for c in host):
+        try:
+            ipaddress.ip_address(host)
+        except ValueError:
+            raise RoutefuseError("--host", f"{host[:60]!r} is not an IP address") from None
+    try:
+        infos = socket.getaddrinfo(host, port, type=socket.SOCK_STREAM, flags=socket.AI_PASSIVE)
+    except (OSError, UnicodeError) as exc:
+        raise RoutefuseError("--host", f"cannot resolve {host[:60]!r} ({exc})") from None
+    family, kind, proto, _, address = infos[0]
+    with socket.socket(family, kind, proto) as probe:
+        probe.setsockopt(socket.SOL_SOCKET, socket.SO_REUSEADDR, 1)
+        try:
+            probe.bind(address)
+        except OSError as exc:
+            if exc.errno != errno.EADDRINUSE:
+                raise RoutefuseError(
+                    "--host", f"cannot listen on {host[:60]}:{port} ({exc.strerror or exc})"
+                ) from None
 
 
 def start(
@@ -184,6 +223,11 @@ def execute(args: argparse.Namespace) -> int:
     from inspector.folders import exit_on_termination_signals
     from inspector.timeline import format_outages, normalise_outages
 
+    if not (math.isfinite(args.max_upload_mb) and 0 < args.max_upload_mb <= MAX_UPLOAD_MB):
+        raise RoutefuseError(
+            "--max-upload-mb", f"{args.max_upload_mb} is not in (0, {MAX_UPLOAD_MB}]"
+        )
+    check_listen_address(args.host, args.port)
     params = params_from_args(args)
     outages = tuple(parse_outage(o) for o in args.outage)
     log, route = resolve_inputs(args.log, args.route)

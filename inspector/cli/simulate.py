@@ -3,6 +3,7 @@
 from __future__ import annotations
 
 import argparse
+import math
 import sys
 import time
 from pathlib import Path
@@ -84,6 +85,15 @@ def execute(args: argparse.Namespace) -> int:
         raise ConfigError(None, "give a SCENARIO (routefuse simulate --list shows them)")
     if args.out is None:
         raise ConfigError(None, "give the output folder with --out DIR")
+    if args.out.exists() and not args.out.is_dir():
+        raise ConfigError(args.out, "--out exists and is not a folder")
+    if not 0 <= args.seed < 2**32:
+        raise ConfigError("--seed", f"{args.seed} is outside [0, 2**32 - 1]")
+    for flag, value in (("--imu-rate", args.imu_rate), ("--duration-scale", args.duration_scale)):
+        if not (math.isfinite(value) and value > 0):
+            raise ConfigError(flag, f"{value} is not a positive finite number")
+    if args.duration is not None and not (math.isfinite(args.duration) and args.duration > 0):
+        raise ConfigError("--duration", f"{args.duration} is not a positive finite number")
     scenario = get_scenario(args.scenario)
     suffix = {"mcap": ".mcap", "sqlite3": "", "ros1": ".bag"}[args.storage]
     bag = args.out / f"{scenario.name}{suffix}"
