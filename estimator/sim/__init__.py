@@ -1,8 +1,8 @@
 """Tunnel scenario simulator: truth, MEMS IMU, wheel speed, GNSS with tunnel outages, and the
 SD-map route, written as a ROS 2 bag plus GeoJSON.
 
-The navigation model (frames, gravity, Earth rate, specific force) is in :mod:`estimator.nav.earth`; the
-estimator's mechanisation must match it. Typical use::
+The navigation model (frames, gravity, Earth rate, specific force) is in
+:mod:`estimator.nav.earth`; the estimator's mechanisation must match it. Typical use::
 
     sim = simulate("long_tunnel", seed=0)               # or perfect=True for ideal sensors
     log, route = sim.log(), sim.route()

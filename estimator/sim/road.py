@@ -12,7 +12,7 @@ Gauss-Legendre quadrature on cells of at most one metre, to 1e-12 m per cell.
 
 from __future__ import annotations
 
-from collections.abc import Sequence
+from collections.abc import Callable, Sequence
 from dataclasses import dataclass, field, replace
 from typing import Literal
 
@@ -24,6 +24,8 @@ from scipy.sparse.linalg import spsolve
 from estimator.errors import ConfigError
 
 F64 = NDArray[np.float64]
+CurvatureShape = Literal["linear", "cosine"]
+"""how a piece's curvature goes from its start value to its end value"""
 
 _GL_X, _GL_W = np.polynomial.legendre.leggauss(8)
 
@@ -43,7 +45,7 @@ class Piece:
     tunnel: bool = False
     scalable: bool = True
     """whether ``duration_scale`` stretches this piece (straights yes, turns no)"""
-    shape: Literal["linear", "cosine"] = "linear"
+    shape: CurvatureShape = "linear"
     """how curvature changes: ``linear`` (a clothoid) or ``cosine`` (a half-cosine, so the
     curvature rate, and with it the yaw acceleration and roll rate, is continuous too)"""
 
@@ -83,12 +85,15 @@ def turn(
     total = abs(np.radians(angle_deg)) * radius_m
     tr = min(transition_m, total)
     arc_len = total - tr
-    common = {"speed_m_s": speed_m_s, "grade": grade, "tunnel": tunnel, "scalable": False}
-    shape = "linear" if transition == "clothoid" else "cosine"
-    pieces = [Piece(tr, 0.0, k, shape=shape, **common)]
+    shape: CurvatureShape = "linear" if transition == "clothoid" else "cosine"
+
+    def piece(length: float, k0: float, k1: float, piece_shape: CurvatureShape) -> Piece:
+        return Piece(length, k0, k1, speed_m_s, grade, tunnel, scalable=False, shape=piece_shape)
+
+    pieces = [piece(tr, 0.0, k, shape)]
     if arc_len > 1e-9:
-        pieces.append(Piece(arc_len, k, k, **common))
-    pieces.append(Piece(tr, k, 0.0, shape=shape, **common))
+        pieces.append(piece(arc_len, k, k, "linear"))
+    pieces.append(piece(tr, k, 0.0, shape))
     return tuple(pieces)
 
 
@@ -111,14 +116,26 @@ class CosineSteps:
     start: F64
     length: F64
     delta: F64
-    _order: F64 = field(init=False, repr=False, compare=False)
+    _s: F64 = field(init=False, repr=False, compare=False)
+    """step starts, in order"""
+    _l: F64 = field(init=False, repr=False, compare=False)
+    _d: F64 = field(init=False, repr=False, compare=False)
+    _e: F64 = field(init=False, repr=False, compare=False)
+    """step ends, in the order of the starts"""
+    _end_sorted: F64 = field(init=False, repr=False, compare=False)
+    _cum_d: F64 = field(init=False, repr=False, compare=False)
+    """rise of the steps finished by each sorted end (prefix sums, 0 first)"""
+    _cum_dm: F64 = field(init=False, repr=False, compare=False)
+    """prefix sums of rise times mid-point: the integral of the finished steps"""
+    _lmax: float = field(init=False, repr=False, compare=False)
+    _width: int = field(init=False, repr=False, compare=False)
+    """most steps that can be active at one x: the window the evaluation loops over"""
 
     def __post_init__(self) -> None:
         order = np.argsort(self.start, kind="stable")
         start, length, delta = self.start[order], self.length[order], self.delta[order]
         end = start + length
         by_end = np.argsort(end, kind="stable")
-        object.__setattr__(self, "_order", order)
         object.__setattr__(self, "_s", start)
         object.__setattr__(self, "_l", length)
         object.__setattr__(self, "_d", delta)
@@ -136,7 +153,7 @@ class CosineSteps:
             width = 0
         object.__setattr__(self, "_width", width)
 
-    def _eval(self, x: F64, kind: str) -> F64:
+    def _eval(self, x: F64, kind: Literal["value", "derivative", "integral"]) -> F64:
         """Sum over steps of delta times (ramp value | slope | antiderivative) at x."""
         out = np.zeros(len(x))
         if not len(self._d):
@@ -177,14 +194,22 @@ class CosineSteps:
         return self.base * xa + self._eval(xa, "integral") - self._eval(np.zeros(1), "integral")
 
 
-def _steps(pieces: Sequence[Piece], attr: str, s0: F64, default: float, ramp_len) -> CosineSteps:
-    cur = getattr(pieces[0], attr)
-    cur = default if cur is None else cur
+def _steps(
+    pieces: Sequence[Piece],
+    attr: Literal["speed_m_s", "grade"],
+    s0: F64,
+    default: float,
+    ramp_len: Callable[[float, float], float],
+) -> CosineSteps:
+    first: float | None = getattr(pieces[0], attr)
+    cur = default if first is None else first
     base = cur
-    starts, lengths, deltas = [], [], []
+    starts: list[float] = []
+    lengths: list[float] = []
+    deltas: list[float] = []
     prev_end = -np.inf
     for i, p in enumerate(pieces):
-        v = getattr(p, attr)
+        v: float | None = getattr(p, attr)
         if v is None or i == 0 or v == cur:
             continue
         length = ramp_len(cur, v)
@@ -223,6 +248,15 @@ class Road:
     """lane speed (m/s) as a function of sigma"""
     grade: CosineSteps = field(init=False, repr=False)
     """centreline grade dh/dsigma as a function of sigma (height = its integral)"""
+    _s0: F64 = field(init=False, repr=False, compare=False)
+    _ka: F64 = field(init=False, repr=False, compare=False)
+    _dk: F64 = field(init=False, repr=False, compare=False)
+    """curvature change per metre of each piece (its mean rate for a cosine piece)"""
+    _len: F64 = field(init=False, repr=False, compare=False)
+    _cos: NDArray[np.bool_] = field(init=False, repr=False, compare=False)
+    _psi0: F64 = field(init=False, repr=False, compare=False)
+    _grid: F64 = field(init=False, repr=False, compare=False)
+    _grid_xy: F64 = field(init=False, repr=False, compare=False)
 
     def __post_init__(self) -> None:
         p = self.pieces
@@ -276,9 +310,21 @@ class Road:
     def length(self) -> float:
         return float(self._s0[-1])
 
+    @property
+    def piece_bounds(self) -> F64:
+        """(P + 1,) sigma where each piece starts, then the road's end."""
+        return self._s0
+
+    @property
+    def cell_bounds(self) -> F64:
+        """Sigma of the integration cells' bounds: cells of at most one metre that never
+        straddle a piece boundary, so quadrature over a cell meets no kink."""
+        return self._grid
+
     def piece_index(self, sigma: ArrayLike) -> NDArray[np.intp]:
         s = np.atleast_1d(np.asarray(sigma, np.float64))
-        return np.clip(np.searchsorted(self._s0, s, side="right") - 1, 0, len(self.pieces) - 1)
+        index: NDArray[np.intp] = np.searchsorted(self._s0, s, side="right") - 1
+        return np.clip(index, 0, len(self.pieces) - 1)
 
     def _local(self, sigma: ArrayLike) -> tuple[NDArray[np.intp], F64, F64]:
         s = np.atleast_1d(np.asarray(sigma, np.float64))
@@ -290,19 +336,22 @@ class Road:
         i, x, ph = self._local(sigma)
         lin = self._dk[i] * x
         cos = self._dk[i] * self._len[i] * 0.5 * (1.0 - np.cos(ph))
-        return self._ka[i] + np.where(self._cos[i], cos, lin)
+        kappa: F64 = self._ka[i] + np.where(self._cos[i], cos, lin)
+        return kappa
 
     def curvature_rate(self, sigma: ArrayLike) -> F64:
         """d(curvature)/d(sigma), 1/m^2."""
         i, _, ph = self._local(sigma)
-        return self._dk[i] * np.where(self._cos[i], 0.5 * np.pi * np.sin(ph), 1.0)
+        rate: F64 = self._dk[i] * np.where(self._cos[i], 0.5 * np.pi * np.sin(ph), 1.0)
+        return rate
 
     def heading(self, sigma: ArrayLike) -> F64:
         i, x, ph = self._local(sigma)
         lin = 0.5 * self._dk[i] * x * x
         length = self._len[i]
         cos = self._dk[i] * length * 0.5 * (x - length / np.pi * np.sin(ph))
-        return self._psi0[i] + self._ka[i] * x + np.where(self._cos[i], cos, lin)
+        psi: F64 = self._psi0[i] + self._ka[i] * x + np.where(self._cos[i], cos, lin)
+        return psi
 
     def _integrate_xy(self, a: F64, b: F64) -> F64:
         """(N, 2) integral of the unit tangent from a to b (within one piece each)."""
@@ -316,7 +365,7 @@ class Road:
         s = np.atleast_1d(np.asarray(sigma, np.float64))
         sc = np.clip(s, 0.0, self.length)
         k = np.clip(np.searchsorted(self._grid, sc, side="right") - 1, 0, len(self._grid) - 2)
-        out = self._grid_xy[k] + self._integrate_xy(self._grid[k], sc)
+        out: F64 = self._grid_xy[k] + self._integrate_xy(self._grid[k], sc)
         over = s - sc
         if np.any(over != 0.0):
             psi = self.heading(sc)
@@ -438,18 +487,23 @@ def _fit_curvature(lengths: F64, dpsi: F64) -> F64:
     m = np.arange(n)
     tie = 1e3
     # unknowns: h_1..h_n (h_0 = 0) at columns 0..n-1, kappa_1..kappa_{n-1} at n..2n-2
-    h = lambda i: i - 1  # noqa: E731
-    k = lambda i: n + i - 1  # noqa: E731
+
+    def h(i: int) -> int:
+        return i - 1
+
+    def k(i: int) -> int:
+        return n + i - 1
+
     r = 0
-    # 1. headings match the data
+    # 1. headings match the data: h_1..h_n are columns 0..n-1
     rows.append(r + m)
-    cols.append(h(m + 1))
+    cols.append(m)
     vals.append(np.ones(n))
     rhs.append(dpsi[1:])
     r += n
     # 2. h_{i+1} - h_i - (kappa_i + kappa_{i+1}) L_i / 2 = 0, kappa_0 = kappa_n = 0, h_0 = 0
     for i in range(n):
-        entries = [(h(i + 1), tie)]
+        entries: list[tuple[int, float]] = [(h(i + 1), tie)]
         if i > 0:
             entries += [(h(i), -tie), (k(i), -tie * 0.5 * lengths[i])]
         if i + 1 < n:
@@ -478,4 +532,5 @@ def _fit_curvature(lengths: F64, dpsi: F64) -> F64:
         shape=(r, 2 * n - 1),
     )
     x = spsolve((a.T @ a).tocsc(), a.T @ np.concatenate(rhs))
-    return np.r_[0.0, x[n:], 0.0]
+    kappa: F64 = np.r_[0.0, x[n:], 0.0]
+    return kappa

@@ -14,7 +14,7 @@ from dataclasses import replace
 from typing import Any
 
 import numpy as np
-from numpy.typing import ArrayLike
+from numpy.typing import ArrayLike, NDArray
 
 from estimator.errors import ConfigError
 from estimator.nav.frames import LocalFrame
@@ -23,6 +23,8 @@ from estimator.sim.road import Piece, Road, pieces_from_polyline, straight, turn
 from estimator.sim.scenario import Scenario
 from estimator.sim.sdmap import RouteModel, map_route
 from estimator.sim.trajectory import Trajectory
+
+F64 = NDArray[np.float64]
 
 
 def _open_sky_warmup(speed: float) -> tuple[Piece, ...]:
@@ -158,31 +160,78 @@ def polyline_scenario(
     )
     approach = tuple(_open_sky_warmup(speed_m_s) if approach is None else approach)
     probe = Road(approach)
-    end_xy = probe.xy(probe.length)[0]
-    heading0 = road_heading - float(probe.heading(probe.length)[0])
+    start, heading0 = _approach_placement(probe, road_start, road_heading)
+    road_pieces = _tunnel_speed_and_exit_grade(road_pieces, tunnel_speed_m_s)
+    road_pieces = _cap_speed_in_curves(road_pieces, speed_m_s, max_lateral_accel_m_s2)
+    exit_road = straight(exit_m, speed_m_s=exit_speed_m_s)
+    pieces = approach + road_pieces + exit_road
+    road = Road(pieces, start_xy=start, heading0=heading0)
+    route_model: RouteModel = scenario_options.pop("route", RouteModel())
+    route_lonlat = _polyline_route(
+        road,
+        xy,
+        frame,
+        route_model,
+        polyline_sigma=(probe.length, probe.length + sum(p.length_m for p in road_pieces)),
+    )
+    return Scenario(
+        name=name,
+        description=description or f"a drive along the given polyline {name}",
+        pieces=pieces,
+        origin=(lat0, lon0, origin_h_m),
+        heading0_deg=float(np.degrees(heading0)),
+        start_xy=start,
+        route_lonlat=route_lonlat,
+        route=route_model,
+        **scenario_options,
+    )
+
+
+def _approach_placement(
+    approach: Road, road_start: tuple[float, float], road_heading: float
+) -> tuple[tuple[float, float], float]:
+    """Start point and heading that make ``approach`` end tangentially where the road starts."""
+    end_xy = approach.xy(approach.length)[0]
+    heading0 = road_heading - float(approach.heading(approach.length)[0])
     c, s = np.cos(heading0), np.sin(heading0)
     start = np.asarray(road_start) - np.array(
         [c * end_xy[0] - s * end_xy[1], s * end_xy[0] + c * end_xy[1]]
     )
-    in_tunnel = [i for i, p in enumerate(road_pieces) if p.tunnel]
-    if in_tunnel:
-        n_in, n_out = in_tunnel[0], in_tunnel[-1] + 1
-        pieces_list = list(road_pieces)
-        if tunnel_speed_m_s is not None:
-            pieces_list[n_in] = replace(pieces_list[n_in], speed_m_s=tunnel_speed_m_s)
-        if n_out < len(pieces_list):
-            pieces_list[n_out] = replace(pieces_list[n_out], grade=0.0)
-        road_pieces = tuple(pieces_list)
-    road_pieces = _cap_speed_in_curves(road_pieces, speed_m_s, max_lateral_accel_m_s2)
-    exit_road = straight(exit_m, speed_m_s=exit_speed_m_s)
-    pieces = approach + road_pieces + exit_road
-    road = Road(pieces, start_xy=(float(start[0]), float(start[1])), heading0=heading0)
-    a_len, o_len = probe.length, sum(p.length_m for p in road_pieces)
-    route_model = scenario_options.pop("route", RouteModel())
+    return (float(start[0]), float(start[1])), heading0
+
+
+def _tunnel_speed_and_exit_grade(
+    pieces: tuple[Piece, ...], tunnel_speed_m_s: float | None
+) -> tuple[Piece, ...]:
+    """The tunnel's own speed from its first piece on, level road again after its last."""
+    in_tunnel = [i for i, p in enumerate(pieces) if p.tunnel]
+    if not in_tunnel:
+        return pieces
+    n_in, n_out = in_tunnel[0], in_tunnel[-1] + 1
+    pieces_list = list(pieces)
+    if tunnel_speed_m_s is not None:
+        pieces_list[n_in] = replace(pieces_list[n_in], speed_m_s=tunnel_speed_m_s)
+    if n_out < len(pieces_list):
+        pieces_list[n_out] = replace(pieces_list[n_out], grade=0.0)
+    return tuple(pieces_list)
+
+
+def _polyline_route(
+    road: Road,
+    polyline_xy: F64,
+    frame: LocalFrame,
+    route_model: RouteModel,
+    *,
+    polyline_sigma: tuple[float, float],
+) -> tuple[tuple[float, float], ...]:
+    """(lon, lat) route: the given polyline's own vertices, the approach and the exit mapped
+    as :func:`.sdmap.map_route` does, and straight extensions of ``route_model.extend_m``.
+    ``polyline_sigma`` is where the polyline's part of ``road`` starts and ends."""
+    a_len, b_len = polyline_sigma
     unextended = replace(route_model, extend_m=0)
     before = map_route(road.xy(np.linspace(0.0, a_len, 200)), unextended)
-    after = map_route(road.xy(np.linspace(a_len + o_len, road.length, 100)), unextended)
-    vertices = np.vstack([before[:-1], xy, after[1:]])
+    after = map_route(road.xy(np.linspace(b_len, road.length, 100)), unextended)
+    vertices = np.vstack([before[:-1], polyline_xy, after[1:]])
     d0 = (vertices[0] - vertices[1]) / np.hypot(*(vertices[0] - vertices[1]))
     d1 = (vertices[-1] - vertices[-2]) / np.hypot(*(vertices[-1] - vertices[-2]))
     vertices = np.vstack(
@@ -193,18 +242,7 @@ def polyline_scenario(
         ]
     )
     geo = frame.to_geodetic(vertices + np.asarray(route_model.bias_enu_m, np.float64))
-    route_lonlat = tuple((round(float(lon), 8), round(float(lat), 8)) for lat, lon, _ in geo)
-    return Scenario(
-        name=name,
-        description=description or f"a drive along the given polyline {name}",
-        pieces=pieces,
-        origin=(lat0, lon0, origin_h_m),
-        heading0_deg=float(np.degrees(heading0)),
-        start_xy=(float(start[0]), float(start[1])),
-        route_lonlat=route_lonlat,
-        route=route_model,
-        **scenario_options,
-    )
+    return tuple((round(float(lon), 8), round(float(lat), 8)) for lat, lon, _ in geo)
 
 
 def _cap_speed_in_curves(
@@ -326,7 +364,7 @@ def long_drive(minutes: float, *, seed: int = 0) -> Scenario:
     # cut at the last open straight that ends before the target time, then a final straight
     road = Road(tuple(pieces))
     traj = Trajectory(road)
-    ends = traj.time_at(road._s0[1:])
+    ends = traj.time_at(road.piece_bounds[1:])
     cut = max(
         i
         for i, p in enumerate(pieces)

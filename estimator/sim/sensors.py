@@ -34,7 +34,8 @@ def gauss_markov(
     a = np.exp(-dt / tau)
     x = w * (sigma * np.sqrt(1.0 - a * a))
     x[0] = w[0] * sigma
-    return lfilter([1.0], [1.0, -a], x, axis=0)
+    samples: F64 = lfilter([1.0], [1.0, -a], x, axis=0)
+    return samples
 
 
 def quantise(x: F64, lsb: float) -> F64:

@@ -164,6 +164,66 @@ def _in_any(t: F64, intervals: list[tuple[float, float]]) -> NDArray[np.bool_]:
     return out
 
 
+def _gnss(
+    sc: Scenario,
+    traj: Trajectory,
+    frame: LocalFrame,
+    rng: np.random.Generator,
+    t0_ns: int,
+    duration: float,
+    tunnel_t: list[tuple[float, float]],
+) -> tuple[GnssData, list[tuple[float, float]]]:
+    """The receiver's fixes (none in a tunnel and until reacquisition, degraded around the
+    portals) and the degraded intervals, relative to the start."""
+    g = sc.gnss
+    blocked = [(a, b + g.reacquisition_s) for a, b in tunnel_t]
+    windows = [(a - g.degraded_before_s, a, 0.0, 1.0) for a, _ in tunnel_t] + [
+        (b + g.reacquisition_s, b + g.reacquisition_s + g.degraded_after_s, 1.0, 0.0)
+        for _, b in tunnel_t
+    ]
+    degraded = [(a, b) for a, b, _, _ in windows if b > a]
+    gnss_ns, gnss_rel = _stamps(t0_ns, g.rate_hz, duration)
+    no_fix = _in_any(gnss_rel, blocked)
+    err, var, _ = gnss_errors(g, rng, gnss_rel, windows)
+    kg = traj.at(gnss_rel)
+    geo = frame.to_geodetic(kg.position + err)
+    geo[no_fix] = np.nan
+    var[no_fix] = np.nan
+    status = np.where(no_fix, GNSS_NO_FIX, 0).astype(np.int8)
+    keep = ~no_fix if sc.gnss_outage == "silent" else np.ones(len(gnss_rel), bool)
+    gnss = GnssData(
+        t=(gnss_ns / 1e9)[keep],
+        lat=geo[keep, 0],
+        lon=geo[keep, 1],
+        alt=geo[keep, 2],
+        status=status[keep],
+        cov_enu=var[keep],
+    )
+    return gnss, degraded
+
+
+def _truth_fix(
+    sc: Scenario, traj: Trajectory, frame: LocalFrame, t0_ns: int, duration: float
+) -> TruthData:
+    truth_ns, truth_rel = _stamps(t0_ns, sc.truth_rate_hz, duration)
+    kt = traj.at(truth_rel)
+    tgeo = frame.to_geodetic(kt.position)
+    return TruthData(
+        t=truth_ns / 1e9, lat=tgeo[:, 0], lon=tgeo[:, 1], alt=tgeo[:, 2], heading=kt.heading
+    )
+
+
+def _route_xy(sc: Scenario, road: Road, frame: LocalFrame) -> F64:
+    """The scenario's own route vertices, or the map route of the road (a vertex every 2 m
+    mapped by ``sc.route``)."""
+    if sc.route_lonlat is not None:
+        ll = np.asarray(sc.route_lonlat, np.float64)
+        route_xy: F64 = frame.to_enu(ll[:, 1], ll[:, 0])[:, :2]
+        return route_xy
+    sig = np.linspace(0.0, road.length, max(int(np.ceil(road.length / 2.0)), 1) + 1)
+    return map_route(road.xy(sig), sc.route)
+
+
 def simulate(
     scenario: str | Scenario,
     *,
@@ -217,44 +277,9 @@ def simulate(
         (float(a), float(b))
         for a, b in (traj.time_at([s0, s1]) for s0, s1 in road.tunnel_intervals())
     ]
-    g = sc.gnss
-    blocked = [(a, b + g.reacquisition_s) for a, b in tunnel_t]
-    windows = [(a - g.degraded_before_s, a, 0.0, 1.0) for a, _ in tunnel_t] + [
-        (b + g.reacquisition_s, b + g.reacquisition_s + g.degraded_after_s, 1.0, 0.0)
-        for _, b in tunnel_t
-    ]
-    degraded = [(a, b) for a, b, _, _ in windows if b > a]
-    gnss_ns, gnss_rel = _stamps(t0_ns, g.rate_hz, duration)
-    no_fix = _in_any(gnss_rel, blocked)
-    err, var, _ = gnss_errors(g, rng_gnss, gnss_rel, windows)
-    kg = traj.at(gnss_rel)
-    geo = frame.to_geodetic(kg.position + err)
-    geo[no_fix] = np.nan
-    var[no_fix] = np.nan
-    status = np.where(no_fix, GNSS_NO_FIX, 0).astype(np.int8)
-    keep = ~no_fix if sc.gnss_outage == "silent" else np.ones(len(gnss_rel), bool)
-    gnss = GnssData(
-        t=(gnss_ns / 1e9)[keep],
-        lat=geo[keep, 0],
-        lon=geo[keep, 1],
-        alt=geo[keep, 2],
-        status=status[keep],
-        cov_enu=var[keep],
-    )
-
-    truth_ns, truth_rel = _stamps(t0_ns, sc.truth_rate_hz, duration)
-    kt = traj.at(truth_rel)
-    tgeo = frame.to_geodetic(kt.position)
-    truth_fix = TruthData(
-        t=truth_ns / 1e9, lat=tgeo[:, 0], lon=tgeo[:, 1], alt=tgeo[:, 2], heading=kt.heading
-    )
-
-    if sc.route_lonlat is not None:
-        ll = np.asarray(sc.route_lonlat, np.float64)
-        route_xy = frame.to_enu(ll[:, 1], ll[:, 0])[:, :2]
-    else:
-        sig = np.linspace(0.0, road.length, max(int(np.ceil(road.length / 2.0)), 1) + 1)
-        route_xy = map_route(road.xy(sig), sc.route)
+    gnss, degraded = _gnss(sc, traj, frame, rng_gnss, t0_ns, duration, tunnel_t)
+    truth_fix = _truth_fix(sc, traj, frame, t0_ns, duration)
+    route_xy = _route_xy(sc, road, frame)
     if progress:
         progress("sensors", 1.0)
     return Simulation(

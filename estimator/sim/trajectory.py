@@ -78,7 +78,7 @@ class Trajectory:
 
     def __post_init__(self) -> None:
         road = self.road
-        grid = road._grid
+        grid = road.cell_bounds
         j = 1.0 - self.lane_offset_m * road.curvature(grid)
         if np.any(j <= 0.05):
             raise ConfigError(
@@ -103,7 +103,7 @@ class Trajectory:
 
     def time_at(self, sigma: ArrayLike) -> F64:
         s = np.clip(np.atleast_1d(np.asarray(sigma, np.float64)), 0.0, self.road.length)
-        g = self.road._grid
+        g = self.road.cell_bounds
         k = np.clip(np.searchsorted(g, s, side="right") - 1, 0, len(g) - 2)
         return self._t_grid[k] + self._integrate_dt(g[k], s)
 
@@ -112,7 +112,7 @@ class Trajectory:
         ta = np.atleast_1d(np.asarray(t, np.float64))
         if np.any((ta < -1e-9) | (ta > self.duration_s + 1e-9)):
             raise ConfigError(None, f"times outside the drive [0, {self.duration_s:.3f}] s")
-        s = np.interp(ta, self._t_grid, self.road._grid)
+        s = np.interp(ta, self._t_grid, self.road.cell_bounds)
         for _ in range(4):
             rate = self.road.speed.value(s) / self._jacobian(s)
             s = np.clip(s - (self.time_at(s) - ta) * rate, 0.0, self.road.length)
