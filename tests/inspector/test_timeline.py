@@ -59,8 +59,9 @@ def test_outage_text_reads_like_the_outage_option_and_writes_back():
         ("30:60, 90", "is not START:END"),
         ("60:30", "END must be after START"),
         ("30:30", "END must be after START"),
-        ("30:nan", "END must be after START"),
-        ("30:inf", "END must be after START"),
+        ("30:nan", "must be finite numbers"),
+        ("30:inf", "must be finite numbers"),
+        ("-100:-50", "negative times"),
     ):
         with pytest.raises(ConfigError, match=why) as info:
             parse_outages(bad)
