@@ -138,6 +138,7 @@ def assemble(
     if len(gt) == 0:
         raise LogError(path, f"GNSS topic {roles.gnss} has no messages")
     gnss = _gnss(gt, gv, f"GNSS {roles.gnss}", warnings)
+    _check_shared_clock(path, imu.t, gnss.t)
     if not gnss.valid.any():
         warnings.append(f"GNSS {roles.gnss}: no valid fix in the whole log")
 
@@ -158,6 +159,19 @@ def assemble(
         for topic in sorted(types)
     )
     return Log(str(path), imu, gnss, wheel, truth, topics, tuple(warnings))
+
+
+def _check_shared_clock(path: Path, imu_t: F64, gnss_t: F64) -> None:
+    """IMU and GNSS that share no instant were stamped on different clocks (an IMU in time since
+    boot, fixes in Unix time): no estimate can pair them, so the log is refused with both spans
+    named rather than run into an empty result."""
+    if imu_t[0] <= gnss_t[-1] and gnss_t[0] <= imu_t[-1]:
+        return
+    raise LogError(
+        path,
+        "IMU and GNSS are stamped on different clocks (no common time): "
+        f"IMU {imu_t[0]:.1f}-{imu_t[-1]:.1f} s, GNSS {gnss_t[0]:.1f}-{gnss_t[-1]:.1f} s",
+    )
 
 
 def _gnss(t: F64, v: F64, name: str, warnings: list[str]) -> GnssData:
