@@ -138,6 +138,20 @@ class LongWindow:
 
 
 @dataclass(frozen=True)
+class MapBiasUse:
+    """The map bias an attempt was matched with (``extensions.map_bias``): its pseudo-position
+    comes from the route moved back by ``offset``, whose error (covariance ``cov`` at the
+    attempt) the filter carries as a state shared by all of the outage's matches."""
+
+    offset: F64
+    """(2,) E, N, m: where the route lies relative to the road driven"""
+    cov: F64
+    """(2, 2) m^2"""
+    along_observed: bool
+    """the approach's shape fixed the along-track bias"""
+
+
+@dataclass(frozen=True)
 class HeadingObservation:
     """The yaw observation an accepted match's fitted rotation was applied as
     (``extensions.heading_observation``)."""
@@ -201,6 +215,7 @@ class MatchRecord:
     """None when the window could not be registered (too short, off the route)"""
     long_window: LongWindow | None = None
     heading_observation: HeadingObservation | None = None
+    map_bias: MapBiasUse | None = None
     extra: dict[str, float] = field(default_factory=dict)
     """free-form scalars for display (candidate validation's chi-square and costs, ...)"""
 
@@ -246,6 +261,14 @@ class MatchRecord:
             out["heading_obs_rad"] = self.heading_observation.yaw_rad
             out["heading_obs_sigma_rad"] = self.heading_observation.sigma_rad
             out["heading_correction_rad"] = self.heading_observation.correction_rad
+        if self.map_bias is not None and self.fit is not None:
+            n = self.fit.normal
+            t = np.array([n[1], -n[0]])
+            c = self.map_bias.cov
+            out["map_bias_along_m"] = float(t @ self.map_bias.offset)
+            out["map_bias_along_sigma_m"] = float(np.sqrt(t @ c @ t))
+            out["map_bias_cross_m"] = float(n @ self.map_bias.offset)
+            out["map_bias_cross_sigma_m"] = float(np.sqrt(n @ c @ n))
         return out
 
 

@@ -34,8 +34,10 @@ E_BG = 9  # (3)
 E_BA = 12  # (3)
 E_SCALE = 15
 E_GW = 16  # (3)
-E_LANE = 19  # the lane-offset error the route pseudo-positions keep (considered, never corrected)
-NE = 20
+# considered states (Schmidt: never corrected, their gain is zero) come last, from E_LANE on
+E_LANE = 19  # the lane-offset error the route pseudo-positions keep
+E_MAP = 20  # (2) the map-bias error E, N the route pseudo-positions keep (extensions.map_bias)
+NE = 22
 
 # aux: bookkeeping
 A_TIME = 0  # time of the state: the last IMU sample processed

@@ -26,6 +26,7 @@ from estimator.filter.layout import (
     E_BA,
     E_BG,
     E_GW,
+    E_LANE,
     E_VEL,
     NE,
 )
@@ -84,7 +85,8 @@ def _f_times(
         out[16, c] = -inv_tau_w * M[16, c]
         out[17, c] = -inv_tau_w * M[17, c]
         out[18, c] = -inv_tau_w * M[18, c]
-        out[19, c] = 0.0
+        for k in range(E_LANE, NE):
+            out[k, c] = 0.0  # considered states are constant
 
 
 @kernel

@@ -29,6 +29,7 @@ from estimator.filter.layout import (
     E_BG,
     E_GW,
     E_LANE,
+    E_MAP,
     E_POS,
     E_SCALE,
     E_VEL,
@@ -130,16 +131,18 @@ def apply_update(x: F64, P: F64, y: F64, m: int, PHt: F64, Si: F64, scale_on: bo
 def _apply_gain(
     x: F64, P: F64, y: F64, m: int, PHt: F64, Si: F64, scale_on: bool, K: F64, dx: F64
 ) -> None:
-    # the lane-offset error is considered, not estimated (Schmidt): its gain is zero, and as
-    # the last state the symmetric update below then leaves its variance as it was
+    # the lane-offset and map-bias errors are considered, not estimated (Schmidt): their gain
+    # is zero, and as the last states the symmetric update below then leaves their covariance
+    # as it was
     for i in range(NE):
         for a in range(m):
             acc = 0.0
             for b in range(m):
                 acc += PHt[i, b] * Si[b, a]
             K[i, a] = acc  # K = P H^T S^-1
-    for a in range(m):
-        K[E_LANE, a] = 0.0
+    for i in range(E_LANE, NE):
+        for a in range(m):
+            K[i, a] = 0.0
     for i in range(NE):
         for j in range(i, NE):
             acc = 0.0
@@ -298,8 +301,9 @@ def pseudo_position_update(
     [innovation E, N, correction E, N]. Also asks the next GNSS fix to widen the position
     covariance (see :func:`estimator.filter.gnss.widen_position`).
 
-    The truth is ``z + normal * (lane-offset error) + noise`` (``normal``: the route's left
-    normal at the match; zero leaves the lane-offset error out)."""
+    The truth is ``z + normal * (lane-offset error) - (map-bias error) + noise`` (``normal``:
+    the route's left normal at the match; zero leaves the lane-offset error out; the map-bias
+    error is zero unless :func:`set_map_bias` gave it a covariance)."""
     flush_covariance(P, aux, cfg)
     H = np.zeros((3, NE))
     R = np.zeros((3, 3))
@@ -308,8 +312,9 @@ def pseudo_position_update(
     S = np.empty((3, 3))
     Si = np.empty((3, 3))
     for a in range(2):
-        H[a, E_POS + a] = 1.0  # z = p + dp - normal * d_lane
+        H[a, E_POS + a] = 1.0  # z = p + dp - normal * d_lane + d_map
         H[a, E_LANE] = -normal[a]
+        H[a, E_MAP + a] = 1.0
         y[a] = z[a] - x[X_POS + a]  # y = z - p (the lane error has no nominal value)
         for b in range(2):
             R[a, b] = R2[a, b]
@@ -338,6 +343,32 @@ def clone_lane_offset(P: F64, aux: F64, cfg: F64, normal: F64) -> None:
         P[E_LANE, j] = v
         P[j, E_LANE] = v
     P[E_LANE, E_LANE] = normal[0] * P[E_LANE, E_POS] + normal[1] * P[E_LANE, E_POS + 1]
+
+
+@kernel
+def set_map_bias(P: F64, aux: F64, cfg: F64, cov: F64) -> None:
+    """Start an outage's map-bias error with the covariance ``cov`` (2, 2) of the bias learned
+    before it (:mod:`estimator.matching.map_bias`), uncorrelated with the rest of the state.
+
+    Every pseudo-position of the outage comes from the same map, moved back by the same
+    estimated bias, so all of them share its error: carried as a considered state, consecutive
+    matches still tie the estimate to the route's shape while the absolute position never
+    claims to be better known than the map's bias."""
+    flush_covariance(P, aux, cfg)
+    for i in range(2):
+        for j in range(NE):
+            P[E_MAP + i, j] = 0.0
+            P[j, E_MAP + i] = 0.0
+    for i in range(2):
+        for j in range(2):
+            P[E_MAP + i, E_MAP + j] = cov[i, j]
+
+
+@kernel
+def grow_map_bias(P: F64, var: float) -> None:
+    """The map's bias changes along the road: add ``var`` (m^2) to each axis of its error."""
+    for i in range(2):
+        P[E_MAP + i, E_MAP + i] += var
 
 
 @kernel

@@ -234,6 +234,57 @@ class OffsetParams:
     max_offset_m: float = param(
         8.0, "offsets larger than this are not learned (off-route)", unit="m", lo=0, hi=50, step=0.5
     )
+    map_bias_track_m: float = param(
+        800.0,
+        "GNSS-good driving before an outage registered to the route to learn the map's bias "
+        "(extensions.map_bias)",
+        unit="m",
+        lo=50,
+        hi=3000,
+        step=50,
+    )
+    map_bias_prior_sigma_m: float = param(
+        10.0,
+        "1-sigma of the map's bias before it is learned (what an unobserved direction keeps)",
+        unit="m",
+        lo=0.1,
+        hi=100,
+        step=0.5,
+    )
+    map_bias_walk_m_per_sqrt_km: float = param(
+        1.0,
+        "random walk of the map's bias along the road: its 1-sigma grows by this after 1 km",
+        unit="m/sqrt(km)",
+        lo=0,
+        hi=1000,
+        step=0.5,
+    )
+    map_bias_cross_sigma_m: float = param(
+        1.5,
+        "1-sigma of the map's bias across the road at the outage start: a straight approach "
+        "cannot tell the lane from a map shifted sideways, which a later bend turns into "
+        "along-track error",
+        unit="m",
+        lo=0,
+        hi=50,
+        step=0.1,
+    )
+    map_bias_min_sigmas: float = param(
+        2.5,
+        "an along-track bias measured within this many of its sigmas of zero is not applied "
+        "(its uncertainty still is)",
+        lo=0,
+        hi=10,
+        step=0.1,
+    )
+    map_bias_max_residual_m: float = param(
+        3.0,
+        "a GNSS track fitting the route worse than this (RMS) teaches no bias (another road)",
+        unit="m",
+        lo=0.1,
+        hi=50,
+        step=0.1,
+    )
 
 
 @dataclass(frozen=True)
@@ -280,6 +331,12 @@ class ExtensionParams:
         "that disagree with dead reckoning (fixed-lag re-run from a saved state)",
     )
     wheel_scale_state: bool = param(True, "estimate the wheel-speed scale factor as a state")
+    map_bias: bool = param(
+        False,
+        "learn where the route lies relative to the road driven (along and across) from the "
+        "GNSS-good track before each outage, take pseudo-positions from the route moved back by "
+        "it, and carry its uncertainty, shared by all of an outage's matches, in their covariance",
+    )
 
 
 @dataclass(frozen=True)

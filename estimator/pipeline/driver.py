@@ -36,18 +36,21 @@ from estimator.filter.layout import (
     A_NEXT_OUT,
     A_TIME,
     C_OUT_DT,
+    E_MAP,
+    E_POS,
     I_IMU,
     O_DIST,
     O_DR,
     O_GNSS,
     O_POS,
+    O_SIG_POS,
     O_T,
 )
 from estimator.filter.portal import advance_to_outage
 from estimator.filter.propagation import flush_covariance
 from estimator.filter.route_update import apply_route_match
 from estimator.filter.setup import FilterInputs, prepare_inputs
-from estimator.filter.updates import clone_lane_offset
+from estimator.filter.updates import clone_lane_offset, grow_map_bias, set_map_bias
 from estimator.log import Log
 from estimator.matching import (
     MatchGeometry,
@@ -58,6 +61,7 @@ from estimator.matching import (
     route_arc_length,
 )
 from estimator.matching.kernels import max_turn_deg, search_right, track_window
+from estimator.matching.map_bias import MapBias, learn_map_bias, prior_bias
 from estimator.nav.frames import LocalFrame
 from estimator.params import Method, Params, for_method
 from estimator.pipeline.reuse import (
@@ -69,7 +73,7 @@ from estimator.pipeline.reuse import (
     resume,
     reusable_state,
 )
-from estimator.results import Epochs, LongWindow, MatchRecord, Run
+from estimator.results import Epochs, LongWindow, MapBiasUse, MatchRecord, Run
 from estimator.route import Route
 
 F64 = NDArray[np.float64]
@@ -162,6 +166,12 @@ class _Track:
     lane: float = 0.0
     s: float | None = None
     s_dist: float = 0.0
+    t_start: float = -math.inf
+    """start of the current interval"""
+    bias: MapBias | None = None
+    """the map bias of the current interval (``extensions.map_bias``)"""
+    biased_route: Route | None = None
+    """the route moved back by ``bias``: where the road driven is"""
 
 
 class Driver:
@@ -237,6 +247,8 @@ class Driver:
                 if self.p.extensions.lane_offset_state and self.track.s is not None:
                     t = self.route.tangent_at(self.track.s)[0]
                     clone_lane_offset(f.P, f.aux, self.inp.cfg, np.array([-t[1], t[0]]))
+                if self.track.bias is not None:
+                    set_map_bias(f.P, f.aux, self.inp.cfg, self.track.bias.cov)
             while True:
                 t_try = a + tr.min_outage_s + k * tr.interval_s
                 if t_try >= b or t_try > self.inp.imu_t[-1]:
@@ -247,6 +259,10 @@ class Driver:
                 d = float(f.aux[A_DIST])
                 if d - dist_a >= tr.min_outage_distance_m and d - dist_last >= spacing:
                     if not redo:
+                        if self.track.bias is not None:
+                            walk = self.p.offset.map_bias_walk_m_per_sqrt_km
+                            moved = d - (dist_last if dist_last > -math.inf else dist_a)
+                            grow_map_bias(f.P, walk**2 * moved / 1000.0)
                         self._checkpoint("attempt", i, k, dist_a, dist_last)
                     self._attempt_live()
                     dist_last = d
@@ -301,6 +317,34 @@ class Driver:
             params=self.p,
             s_guess=s_last,
         )
+        tr.t_start = t_a
+        tr.bias, tr.biased_route = None, None
+        if self.p.extensions.map_bias:
+            tr.bias = self._learn_bias(rows, last, s_last)
+            tr.biased_route = Route(
+                self.route.xy - tr.bias.offset, name=self.route.name, source=self.route.source
+            )
+
+    def _learn_bias(self, rows: F64, last: NDArray[np.intp], s_last: float) -> MapBias:
+        """The map bias from the estimate over the last ``offset.map_bias_track_m`` of travel
+        up to the last epoch a fix was used in (:func:`learn_map_bias`)."""
+        if not len(last):
+            return prior_bias(self.p)
+        end = int(last[-1])
+        d = rows[: end + 1, O_DIST]
+        i0 = int(search_right(d, float(d[end]) - self.p.offset.map_bias_track_m))
+        track = rows[i0 : end + 1]
+        if np.count_nonzero(track[:, O_GNSS] > 0) < 5:
+            return prior_bias(self.p)
+        sig = track[-1, O_SIG_POS : O_SIG_POS + 2]
+        return learn_map_bias(
+            track[:, O_POS : O_POS + 2],
+            np.diag(sig**2),
+            self.route,
+            s_guess=s_last,
+            lane_offset=self.track.lane,
+            params=self.p,
+        )
 
     def _window(self, out: F64, n_out: int, x: F64, aux: F64, length_m: float) -> F64:
         """The DR track over the last ``length_m`` of travel, integrated from the mechanised
@@ -334,10 +378,15 @@ class Driver:
         w = self.p.window
 
         def attempt(window_xy: F64, params: Params) -> MatchRecord:
-            geometry = self._geometry(window_xy, x[:2].copy(), P[6:8, 6:8].copy(), pred, params)
-            return judge_match(
+            geometry = self._geometry(window_xy, x[:2].copy(), position_on_map_cov(P), pred, params)
+            rec = judge_match(
                 geometry, params, index=len(self.records), t=float(aux[A_TIME]), epoch=n_out
             )
+            bias = self.track.bias
+            if bias is None:
+                return rec
+            used = MapBiasUse(bias.offset, P[E_MAP:, E_MAP:].copy(), bias.along_observed)
+            return dataclasses.replace(rec, map_bias=used)
 
         rec = attempt(self._window(out, n_out, x, aux, w.length_m), self.p)
         if not (
@@ -368,18 +417,29 @@ class Driver:
         return dataclasses.replace(long, long_window=LongWindow(turn, rec.window_length_m))
 
     def _geometry(
-        self, window_xy: F64, p_dr: F64, cov: F64, pred: float | None, params: Params
+        self,
+        window_xy: F64,
+        p_dr: F64,
+        cov: F64,
+        pred: float | None,
+        params: Params,
     ) -> MatchGeometry:
         """:func:`match_geometry` of an attempt, or the previous run's for the same inputs
-        (window, position, covariance, route guess, lane offset and the parameters the geometry
-        depends on): after a gate change the attempts before the first changed outcome are only
-        re-judged, not fitted again."""
-        lane = self.track.lane
+        (window, position, covariance, route guess, lane offset, map bias and the parameters
+        the geometry depends on): after a gate change the attempts before the first changed
+        outcome are only re-judged, not fitted again.
+
+        With a map bias the window is matched to the route moved back by it."""
+        tr = self.track
+        lane, route = tr.lane, self.route
+        bias_key: tuple[float, ...] = ()
+        if tr.bias is not None and tr.biased_route is not None:
+            route, bias_key = tr.biased_route, tuple(map(float, tr.bias.offset))
         return self.memo.get(
-            ("geometry", pred, lane, geometry_params(params)),
+            ("geometry", pred, lane, bias_key, geometry_params(params)),
             (window_xy, p_dr, cov),
             lambda: match_geometry(
-                window_xy, p_dr, cov, self.route, s_guess=pred, lane_offset=lane, params=params
+                window_xy, p_dr, cov, route, s_guess=pred, lane_offset=lane, params=params
             ),
         )
 
@@ -412,6 +472,15 @@ class Driver:
 
     def epochs(self) -> Epochs:
         return epochs_of(self.filt.out, self.filt.n_out, self.inp.degraded)
+
+
+def position_on_map_cov(P: F64) -> F64:
+    """E/N covariance of the position relative to the road the route stands for: the
+    position's, the map-bias error's (zero without ``extensions.map_bias``) and their
+    cross-covariances (H P H^T with H = [I, I])."""
+    pos, bias = slice(E_POS, E_POS + 2), slice(E_MAP, E_MAP + 2)
+    cov: F64 = P[pos, pos] + P[bias, bias] + P[pos, bias] + P[bias, pos]
+    return cov
 
 
 def max_turn(xy: F64, stretch_m: float, spacing_m: float) -> float:

@@ -181,6 +181,8 @@ def resume(d: Driver, old: ReuseState, old_params: Params, *, reuse_matching: bo
         p.trigger == old_params.trigger
         and p.extensions.heading_observation == old_params.extensions.heading_observation
         and p.extensions.lane_offset_state == old_params.extensions.lane_offset_state
+        and p.extensions.map_bias == old_params.extensions.map_bias
+        and (not p.extensions.map_bias or p.offset == old_params.offset)
     )
     if not d.matching and not reuse_matching:
         # baseline after baseline: the filter and its inputs are the same, so is the run

@@ -105,14 +105,15 @@ def test_pseudo_position_update_is_the_kalman_update(normal):
     H = np.zeros((2, layout.NE))
     H[0, layout.E_POS] = H[1, layout.E_POS + 1] = 1.0
     H[:, layout.E_LANE] = -n
+    H[:, layout.E_MAP : layout.E_MAP + 2] = np.eye(2)
     S = H @ P @ H.T + R
     K = P @ H.T @ np.linalg.inv(S)
-    K[layout.E_LANE] = 0.0
+    K[layout.E_LANE :] = 0.0  # the considered states
     y = z - x[:2]
     dx = K @ y
     I_KH = np.eye(layout.NE) - K @ H
     P_exp = I_KH @ P @ I_KH.T + K @ R @ K.T
-    lane_var = P[layout.E_LANE, layout.E_LANE]
+    considered = P[layout.E_LANE :, layout.E_LANE :].copy()
     aux = np.zeros(layout.NA)
     x0 = x.copy()
     res = updates.pseudo_position_update(x, P, aux, cfg, z, R, n)
@@ -121,8 +122,27 @@ def test_pseudo_position_update_is_the_kalman_update(normal):
     np.testing.assert_allclose(x[:3] - x0[:3], dx[6:9], rtol=1e-12)
     np.testing.assert_allclose(x[layout.X_VEL : layout.X_VEL + 3], dx[3:6], rtol=1e-12, atol=1e-15)
     np.testing.assert_allclose(P, P_exp, rtol=1e-10, atol=1e-12)
-    assert P[layout.E_LANE, layout.E_LANE] == lane_var
+    np.testing.assert_array_equal(P[layout.E_LANE :, layout.E_LANE :], considered)
     assert aux[layout.A_INFLATE] == 1.0
+
+
+def test_the_map_bias_error_starts_uncorrelated_and_grows_as_a_random_walk():
+    rng = np.random.default_rng(7)
+    P = _random_cov(rng)
+    cfg = _config(rng)
+    aux = np.zeros(layout.NA)
+    before = P.copy()
+    cov = np.array([[9.0, 2.0], [2.0, 4.0]])
+    updates.set_map_bias(P, aux, cfg, cov)
+    bias = slice(layout.E_MAP, layout.E_MAP + 2)
+    np.testing.assert_array_equal(P[bias, bias], cov)
+    np.testing.assert_array_equal(P[bias, : layout.E_MAP], 0.0)
+    np.testing.assert_array_equal(P, P.T)
+    np.testing.assert_array_equal(
+        P[: layout.E_MAP, : layout.E_MAP], before[: layout.E_MAP, : layout.E_MAP]
+    )
+    updates.grow_map_bias(P, 0.5)
+    np.testing.assert_array_equal(np.diag(P[bias, bias]), np.diag(cov) + 0.5)
 
 
 def test_the_lane_offset_error_starts_as_the_cross_track_position_error():

@@ -26,6 +26,8 @@ def _same_epochs(a, b):
         {"trigger.interval_s": 2.5},
         {"pseudo.sigma_m": 5.0},
         {"noise.nhc_sigma_m_s": 0.3},
+        {"extensions.map_bias": True},
+        {"extensions.map_bias": True, "offset.map_bias_prior_sigma_m": 3.0},
     ],
 )
 def test_reuse_gives_the_same_run_as_starting_over(tunnel, tunnel_proposed, change):
@@ -122,3 +124,16 @@ def test_a_gate_change_refits_no_attempt_before_the_first_changed_outcome(
     else:
         # live again from the first changed attempt on (long windows may add fits)
         assert 0 < len(fits) <= 2 * (len(fresh.matches) - changed[0])
+
+
+def test_reuse_of_a_map_bias_run_after_its_prior_changes(tunnel):
+    """The map bias's covariance is a filter state: a run whose bias prior changed is not
+    taken over attempt by attempt from the previous one, yet equals a fresh run."""
+    log, route, frame = tunnel
+    on = with_values(Params(), {"extensions.map_bias": True})
+    first = run(log, route, on, method="proposed", frame=frame)
+    p = with_values(on, {"offset.map_bias_prior_sigma_m": 2.0})
+    again = run(log, route, p, method="proposed", frame=frame, reuse=first)
+    fresh = run(log, route, p, method="proposed", frame=frame)
+    assert _same_epochs(again, fresh)
+    assert [m.verdict for m in again.matches] == [m.verdict for m in fresh.matches]
