@@ -216,6 +216,10 @@ class MatchRecord:
     long_window: LongWindow | None = None
     heading_observation: HeadingObservation | None = None
     map_bias: MapBiasUse | None = None
+    reanchored: bool = False
+    """accepted although gates failed: the last of a run of consistent, shape-valid matches the
+    filter kept refusing because its covariance did not cover its own drift
+    (``extensions.reanchor``); the filter's covariance was widened to the innovation first"""
     extra: dict[str, float] = field(default_factory=dict)
     """free-form scalars for display (candidate validation's chi-square and costs, ...)"""
 
@@ -225,9 +229,9 @@ class MatchRecord:
 
     @property
     def verdict(self) -> str:
-        """'accepted' or 'rejected: <first failed gate>'."""
+        """'accepted', 'accepted: re-anchored' or 'rejected: <first failed gate>'."""
         if self.accepted:
-            return "accepted"
+            return "accepted: re-anchored" if self.reanchored else "accepted"
         failed = self.failed_gates
         return f"rejected: {failed[0].name}" if failed else "rejected"
 

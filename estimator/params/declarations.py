@@ -165,6 +165,24 @@ class GateParams:
         hi=100,
         step=0.5,
     )
+    reanchor_after: int = param(
+        5,
+        "consecutive shape-valid matches refused only for disagreeing with the filter before "
+        "the filter is re-anchored to the route (extensions.reanchor)",
+        lo=2,
+        hi=100,
+        step=1,
+    )
+    reanchor_gyro_bias_deg_s: float = param(
+        0.25,
+        "largest unmodelled gyro bias a re-anchor may blame: an innovation larger than the "
+        "drift it gives since GNSS was lost (theta = b t, off-track about theta * D / 2) is a "
+        "wrong road, not drift",
+        unit="deg/s",
+        lo=0,
+        hi=5,
+        step=0.01,
+    )
 
 
 @dataclass(frozen=True)
@@ -331,6 +349,12 @@ class ExtensionParams:
         "that disagree with dead reckoning (fixed-lag re-run from a saved state)",
     )
     wheel_scale_state: bool = param(True, "estimate the wheel-speed scale factor as a state")
+    reanchor: bool = param(
+        True,
+        "when consecutive shape-valid matches with no better-shaped rival keep being refused "
+        "only for disagreeing with the filter, by no more than a plausible dead-reckoning drift, "
+        "widen the filter's position and heading covariance to the innovation and accept",
+    )
     map_bias: bool = param(
         False,
         "learn where the route lies relative to the road driven (along and across) from the "

@@ -29,12 +29,14 @@ from numpy.typing import NDArray
 
 from estimator.errors import LogError, RoutefuseError
 from estimator.filter.engine import Filter, epochs_of
+from estimator.filter.gnss import widen_heading
 from estimator.filter.kernel import finite_state
 from estimator.filter.layout import (
     A_DIST,
     A_DR,
     A_NEXT_OUT,
     A_TIME,
+    A_USED_DIST,
     C_OUT_DT,
     E_MAP,
     E_POS,
@@ -48,7 +50,7 @@ from estimator.filter.layout import (
 )
 from estimator.filter.portal import advance_to_outage
 from estimator.filter.propagation import flush_covariance
-from estimator.filter.route_update import apply_route_match
+from estimator.filter.route_update import applied_obs_cov, apply_route_match
 from estimator.filter.setup import FilterInputs, prepare_inputs
 from estimator.filter.updates import clone_lane_offset, grow_map_bias, set_map_bias
 from estimator.log import Log
@@ -62,6 +64,7 @@ from estimator.matching import (
 )
 from estimator.matching.kernels import max_turn_deg, search_right, track_window
 from estimator.matching.map_bias import MapBias, learn_map_bias, prior_bias
+from estimator.matching.reanchor import should_reanchor, within_drift
 from estimator.nav.frames import LocalFrame
 from estimator.params import Method, Params, for_method
 from estimator.pipeline.reuse import (
@@ -456,6 +459,8 @@ class Driver:
         flush_covariance(f.P, f.aux, self.inp.cfg)
         n_out = f.n_out
         rec = self.match(f.out, n_out, f.x, f.P, f.aux)
+        if not rec.accepted and self.p.extensions.reanchor:
+            rec = self._reanchored(rec)
         innovation, correction = rec.innovation, np.zeros(2)
         if rec.accepted:
             innovation, correction, rec = apply_route_match(f, rec, self.p)
@@ -470,8 +475,57 @@ class Driver:
         self.records.append(rec)
         self.after_match(rec, f.x, f.aux)
 
+    def _reanchored(self, rec: MatchRecord) -> MatchRecord:
+        """``rec`` accepted as a re-anchor (:mod:`estimator.matching.reanchor`) after widening
+        the filter's heading and position covariance to its innovation, or ``rec`` itself."""
+        f = self.filt
+        used_dist = float(f.aux[A_USED_DIST])
+        t_start = self.track.t_start
+
+        def checked(r: MatchRecord, cov: F64, dist: float) -> tuple[MatchRecord, bool]:
+            ok = within_drift(
+                r.innovation,
+                cov + applied_obs_cov(r, self.p),
+                seconds=r.t - t_start,
+                metres=dist - used_dist,
+                params=self.p,
+            )
+            return r, ok
+
+        run: list[tuple[MatchRecord, bool]] = []
+        for r in reversed(self.records):
+            if r.t < t_start or r.accepted:
+                break
+            sigma = f.out[r.epoch, O_SIG_POS : O_SIG_POS + 2]
+            run.append(checked(r, np.diag(sigma**2), float(f.out[r.epoch, O_DIST])))
+        run.reverse()
+        s = position_on_map_cov(f.P)
+        run.append(checked(rec, s, float(f.aux[A_DIST])))
+        if not should_reanchor(run, self.p):
+            return rec
+        y = np.ascontiguousarray(rec.innovation, np.float64)
+        widen_heading(f.x, f.P, y, f.aux)
+        widen_to_innovation(f.P, y, s + applied_obs_cov(rec, self.p))
+        return dataclasses.replace(rec, accepted=True, reanchored=True)
+
     def epochs(self) -> Epochs:
         return epochs_of(self.filt.out, self.filt.n_out, self.inp.degraded)
+
+
+def widen_to_innovation(P: F64, y: F64, s: F64) -> None:
+    """Add ``c u u^T`` to the E/N position covariance, ``u`` the innovation's direction, so
+    that the innovation ``y`` becomes one sigma of ``s + c u u^T`` (``s`` its covariance):
+    with ``a = u^T s^-1 u``, Sherman-Morrison gives ``y^T (s + c u u^T)^-1 y = |y|^2 a /
+    (1 + c a)``, so ``c = |y|^2 - 1 / a``. Widening the diagonal instead would be lost in a
+    covariance whose along-track part is large and projects onto both axes."""
+    size = float(np.hypot(*y))
+    if size == 0.0:
+        return
+    u = y / size
+    a = float(u @ np.linalg.solve(s, u))
+    c = size * size - 1.0 / a if a > 0 else 0.0
+    if c > 0.0:
+        P[E_POS : E_POS + 2, E_POS : E_POS + 2] += c * np.outer(u, u)
 
 
 def position_on_map_cov(P: F64) -> F64:

@@ -23,6 +23,7 @@ from estimator.filter.layout import A_TIME, I_OUT, O_POS
 from estimator.filter.propagation import flush_covariance
 from estimator.filter.setup import FilterInputs
 from estimator.log import Log
+from estimator.matching.reanchor import blames_the_filter
 from estimator.nav.frames import LocalFrame
 from estimator.params import Params
 from estimator.results import MatchRecord, Run
@@ -182,6 +183,12 @@ def resume(d: Driver, old: ReuseState, old_params: Params, *, reuse_matching: bo
         and p.extensions.heading_observation == old_params.extensions.heading_observation
         and p.extensions.lane_offset_state == old_params.extensions.lane_offset_state
         and p.extensions.map_bias == old_params.extensions.map_bias
+        and p.extensions.reanchor == old_params.extensions.reanchor
+        and (
+            not p.extensions.reanchor
+            or (p.gates.reanchor_after, p.gates.reanchor_gyro_bias_deg_s)
+            == (old_params.gates.reanchor_after, old_params.gates.reanchor_gyro_bias_deg_s)
+        )
         and (not p.extensions.map_bias or p.offset == old_params.offset)
     )
     if not d.matching and not reuse_matching:
@@ -215,7 +222,9 @@ def _replay_attempts(d: Driver, old: ReuseState) -> None:
         d.records = records
         rec = d.match(old.out, cp.n_out, x, P, aux)
         prev = old.records[cp.n_records]
-        if not same_outcome(rec, prev):
+        # whether a refusal re-anchors depends on the live filter: judged live from there
+        may_reanchor = d.p.extensions.reanchor and blames_the_filter(rec, d.p)
+        if not same_outcome(rec, prev) or may_reanchor:
             _restart(d, old, cp, n_cp + 1, records)
             d.loop(cp.interval, cp)
             return

@@ -11,6 +11,7 @@ import pytest
 from estimator.log import ImuData
 from estimator.params import Params, with_values
 from estimator.pipeline import run
+from tests.robustness._faultdrive import make_drive, route_along
 
 
 def _same_epochs(a, b):
@@ -135,5 +136,29 @@ def test_reuse_of_a_map_bias_run_after_its_prior_changes(tunnel):
     p = with_values(on, {"offset.map_bias_prior_sigma_m": 2.0})
     again = run(log, route, p, method="proposed", frame=frame, reuse=first)
     fresh = run(log, route, p, method="proposed", frame=frame)
+    assert _same_epochs(again, fresh)
+    assert [m.verdict for m in again.matches] == [m.verdict for m in fresh.matches]
+
+
+def test_reuse_of_a_re_anchored_run_equals_starting_over():
+    """Re-anchoring depends on the live filter: a re-run after a gate change that shares the
+    attempts before a re-anchor judges it live again, and equals a fresh run."""
+    drive = make_drive(
+        [(0, 15), (400, 15)],
+        [(0, 0), (200, 0)],
+        duration=160,
+        outages=[(60, 130)],
+        gyro_bias_deg_h=(10.0, -8.0, 0.0),
+    )
+    gyro = drive.log.imu.gyro.copy()
+    t = drive.log.imu.t - drive.log.imu.t[0]
+    gyro[(t > 60) & (t < 130), 2] += np.radians(0.15)
+    log = dataclasses.replace(drive.log, imu=dataclasses.replace(drive.log.imu, gyro=gyro))
+    route = route_along(drive, 0, 160, extend_m=100)
+    first = run(log, route, Params(), method="proposed", frame=drive.frame)
+    assert any(m.reanchored for m in first.matches)
+    p = with_values(Params(), {"gates.max_lateral_jump_m": 4.0})
+    again = run(log, route, p, method="proposed", frame=drive.frame, reuse=first)
+    fresh = run(log, route, p, method="proposed", frame=drive.frame)
     assert _same_epochs(again, fresh)
     assert [m.verdict for m in again.matches] == [m.verdict for m in fresh.matches]
