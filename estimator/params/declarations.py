@@ -349,6 +349,12 @@ class ExtensionParams:
         "that disagree with dead reckoning (fixed-lag re-run from a saved state)",
     )
     wheel_scale_state: bool = param(True, "estimate the wheel-speed scale factor as a state")
+    overlap_inflation: bool = param(
+        False,
+        "count the along-track evidence of overlapping windows once: an accepted match's "
+        "along-track variance is multiplied by the window length over the distance since the "
+        "previous accepted match",
+    )
     reanchor: bool = param(
         True,
         "when consecutive shape-valid matches with no better-shaped rival keep being refused "

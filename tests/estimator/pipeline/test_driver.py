@@ -13,7 +13,7 @@ from scipy.stats import chi2
 from estimator.errors import LogError, RoutefuseError
 from estimator.log import ImuData
 from estimator.params import Params, with_values
-from estimator.pipeline import run
+from estimator.pipeline import open_inputs, run, run_methods
 from estimator.route import Route
 from estimator.sim import simulate
 
@@ -310,3 +310,34 @@ def test_max_turn_is_the_largest_heading_change_over_a_stretch():
     bend = np.vstack([straight[:121], arc[1:], end[1:]])
     assert _max_turn_deg(bend, 250.0, 5.0) == pytest.approx(np.degrees(250.0 / radius), abs=1.0)
     assert _max_turn_deg(bend, 1000.0, 5.0) == pytest.approx(30.0, abs=1.0)
+
+
+def test_overlapping_windows_count_their_along_track_evidence_once():
+    """extensions.overlap_inflation: an accepted match's along-track variance is the same
+    attempt's times the window length over the distance since the previous accepted match."""
+    samples = Path(__file__).resolve().parents[3] / "sample_logs"
+    inputs = open_inputs(samples / "monaco_tunnel.mcap", samples / "monaco_tunnel.route.geojson")
+    p = with_values(Params(), {"extensions.overlap_inflation": True})
+    runs = run_methods(inputs, Params(), methods=("proposed",))
+    on = run_methods(inputs, p, methods=("proposed",))["proposed"]
+    dist = np.r_[0.0, np.cumsum(np.hypot(*np.diff(on.epochs.position[:, :2], axis=0).T))]
+
+    def along_var(m):
+        t = np.array([m.normal[1], -m.normal[0]])
+        return float(t @ m.obs_cov @ t)
+
+    checked = 0
+    previous = None
+    for m in on.matches:
+        if not m.accepted:
+            continue
+        if previous is not None and m.along_observed and m.fit is not None:
+            moved = dist[m.epoch] - dist[previous.epoch]
+            factor = max(m.window_length_m / max(moved, p.window.spacing_m), 1.0)
+            assert factor > 3.0
+            assert along_var(m) == pytest.approx(factor * m.fit.along_sigma_m**2, rel=0.15)
+            checked += 1
+        previous = m
+    assert checked >= 3
+    off = [m for m in runs["proposed"].matches if m.accepted and m.along_observed]
+    assert off and all(along_var(m) == pytest.approx(m.fit.along_sigma_m**2, rel=0.05) for m in off)
