@@ -356,7 +356,7 @@ class ExtensionParams:
         "previous accepted match",
     )
     reanchor: bool = param(
-        True,
+        False,
         "when consecutive shape-valid matches with no better-shaped rival keep being refused "
         "only for disagreeing with the filter, by no more than a plausible dead-reckoning drift, "
         "widen the filter's position and heading covariance to the innovation and accept",

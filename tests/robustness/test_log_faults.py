@@ -170,8 +170,9 @@ def test_an_unmodelled_drift_is_re_anchored_to_the_route() -> None:
     re-anchored to the route and follows it to the end of the tunnel, where dead reckoning is
     70 m off."""
     drive, route = _drift_drive(0.15)
+    on = with_values(Params(), {"extensions.reanchor": True})
     base = _run(drive.log, route, drive.frame, "baseline")
-    prop = _run(drive.log, route, drive.frame, "proposed")
+    prop = _run(drive.log, route, drive.frame, "proposed", on)
     reanchored = [m for m in prop.matches if m.reanchored]
     assert reanchored and all(m.accepted for m in reanchored)
     assert reanchored[0].verdict == "accepted: re-anchored"
@@ -187,7 +188,7 @@ def test_an_unmodelled_drift_is_re_anchored_to_the_route() -> None:
     reason="matching: under an unmodelled 0.15 deg/s gyro drift, matches on the gentle tunnel "
     "bend are accepted up to 16 m off along the road (11-13 m for 9 s; up to 2.1 of their "
     "along-track sigmas, errors correlated from one attempt to the next) while the DR was "
-    "1-5 m off (the later refusals of correct matches are now ended by re-anchoring)",
+    "1-5 m off (the later refusals of correct matches end with extensions.reanchor)",
 )
 def test_matches_under_an_unmodelled_drift_are_no_worse_than_dead_reckoning() -> None:
     drive, route = _drift_drive(0.15)
