@@ -32,7 +32,22 @@ def add_arguments(parser: argparse.ArgumentParser) -> None:
         "--batch",
         metavar="DIR_OR_GLOB",
         help="export every log of a folder (or matching a quoted glob); each log's route is "
-        "<stem>.route.geojson beside it",
+        "<stem>.route.geojson beside it; the logs run as Dask tasks (routefuse sweep's engine) "
+        "and a second run skips the logs exported before",
+    )
+    where = parser.add_mutually_exclusive_group()
+    where.add_argument(
+        "--workers",
+        type=int,
+        metavar="N",
+        default=None,
+        help="with --batch: worker processes of a local Dask cluster (default: one per core)",
+    )
+    where.add_argument(
+        "--scheduler",
+        metavar="ADDR",
+        default=None,
+        help="with --batch: a running Dask scheduler, e.g. tcp://head:8786",
     )
     parser.add_argument(
         "--route-feature",
@@ -106,6 +121,10 @@ def execute(args: argparse.Namespace) -> int:
     if args.batch is not None:
         if args.log is not None or args.route is not None:
             raise ConfigError("--batch", "give either LOG --route ROUTE or --batch, not both")
+        if args.workers is not None and args.workers < 1:
+            raise ConfigError("--workers", f"{args.workers}: at least one worker")
+        from inspector.fleet.engine import TerminalProgress
+
         batch = export_batch(
             find_logs(args.batch),
             out,
@@ -114,7 +133,9 @@ def execute(args: argparse.Namespace) -> int:
             outages=outages,
             topics=topics,
             replay=replay,
-            progress=progress,
+            progress=TerminalProgress(),
+            workers=args.workers,
+            scheduler=args.scheduler,
         )
         print(format_summary(batch.items))
         print(f"summary: {batch.summary_csv}")

@@ -18,6 +18,7 @@ COMMANDS = (
     "inspector.cli.simulate",
     "inspector.cli.serve",
     "inspector.cli.export",
+    "inspector.cli.sweep",
     "inspector.cli.bench",
 )
 

@@ -1,23 +1,31 @@
 """Exports of many logs: find them, pair each with the route beside it, export each into its
-own folder and keep going past a bad one, then write one summary table."""
+own folder and keep going past a bad one, then write one summary table.
+
+The exports run on the sweep engine (:mod:`inspector.fleet.engine`): each log is a Dask task
+(a local cluster of one worker per core, or ``scheduler=`` a running one), a failed log is a row
+with its one-line error, and a second run skips the logs exported before."""
 
 from __future__ import annotations
 
-import glob
-import time
-from collections.abc import Callable, Sequence
+from collections.abc import Callable, Mapping, Sequence
 from dataclasses import dataclass
 from pathlib import Path
+from typing import Any
 
 from estimator.errors import RoutefuseError
-from estimator.io import AUTO_TOPICS, LOG_FORMATS_TEXT, TopicChoice, is_log_path, is_route_path
+from estimator.io import AUTO_TOPICS, TopicChoice
 from estimator.io import route_beside as find_route_beside
 from estimator.params import Method, Params
 from inspector.export import tables as export_tables
-from inspector.export.replay import ExportResult, ReplayOptions, export_log, make_dir
+from inspector.export.replay import ExportResult, ReplayOptions, make_dir
+from inspector.fleet.plan import LogEntry, ParamSet, SweepPlan, collect_logs, find_logs
 
-"""how the route beside a log is named: ``<stem>.route.geojson``"""
+__all__ = ["BatchItem", "BatchResult", "export_batch", "find_logs", "route_beside"]
+
 DEFAULT_REPLAY = ReplayOptions()
+LegacyProgress = Callable[[int, int, Path, str, float], None]
+"""``progress(i, n, log, stage, fraction)``, called as each log finishes (stage ``done`` or
+``failed``)"""
 
 
 @dataclass(frozen=True)
@@ -45,22 +53,6 @@ class BatchResult:
         return tuple(i for i in self.items if not i.ok)
 
 
-def find_logs(spec: str | Path) -> list[Path]:
-    """The logs a batch covers: what the log-format registry recognises directly in a folder,
-    or whatever a glob pattern matches."""
-    p = Path(spec).expanduser()
-    if p.is_dir():
-        found = [c for c in sorted(p.iterdir()) if is_log_path(c)]
-    else:
-        found = [Path(m) for m in sorted(glob.glob(str(p)))]
-        found = [m for m in found if not is_route_path(m)]
-    if not found:
-        raise RoutefuseError(
-            spec, f"no logs found (expected a folder holding {LOG_FORMATS_TEXT}, or a glob)"
-        )
-    return found
-
-
 def route_beside(log: Path) -> Path:
     """The route named after the log beside it (:func:`estimator.io.route_beside`)."""
     route = find_route_beside(log)
@@ -83,46 +75,88 @@ def export_batch(
     outages: Sequence[tuple[float, float]] = (),
     topics: TopicChoice = AUTO_TOPICS,
     replay: ReplayOptions = DEFAULT_REPLAY,
-    progress: Callable[[int, int, Path, str, float], None] | None = None,
+    progress: LegacyProgress | Any | None = None,
+    workers: int | None = None,
+    scheduler: str | None = None,
+    cache_dir: str | Path | None = None,
 ) -> BatchResult:
-    """Export each log into ``out_dir/<stem>/`` and write ``out_dir/summary.csv``. A log that
-    fails (no route beside it, unreadable, ...) is recorded with its one-line error and the
-    batch goes on. ``progress(i, n, log, stage, fraction)``."""
+    """Export each log into ``out_dir/<stem>/`` and write ``out_dir/summary.csv`` (besides the
+    sweep engine's ``results.parquet`` and ``results.csv``). A log that fails (no route beside
+    it, unreadable, ...) is recorded with its one-line error and the batch goes on.
+
+    ``progress``: a :class:`inspector.fleet.engine.SweepProgress`, or a function
+    ``progress(i, n, log, stage, fraction)`` called as each log finishes. ``workers``,
+    ``scheduler``, ``cache_dir``: as :func:`inspector.fleet.run_sweep`."""
+    from inspector.fleet.engine import QuietProgress, SweepLayout, run_sweep
+    from inspector.fleet.table import read_task_file
+
     out = Path(out_dir)
     make_dir(out)
-    items: list[BatchItem] = []
-    used: set[str] = set()
-    for i, log in enumerate(logs):
-        name = log.name.split(".")[0] or "log"
-        folder, k = name, 2
-        while folder in used:
-            folder, k = f"{name}-{k}", k + 1
-        used.add(folder)
-        target = out / folder
-        started = time.perf_counter()
-
-        def report(stage: str, fraction: float, i: int = i, log: Path = log) -> None:
-            if progress is not None:
-                progress(i, len(logs), log, stage, fraction)
-
-        result, error = None, None
-        try:
-            result = export_log(
-                log,
-                route_beside(log),
-                target,
-                params=params,
-                method=method,
-                outages=outages,
-                topics=topics,
-                replay=replay,
-                progress=report,
-            )
-        except RoutefuseError as exc:
-            error = str(exc)
-        except Exception as exc:  # one broken log must not stop the batch
-            error = f"{log}: internal error: {type(exc).__name__}: {exc}"
-        items.append(BatchItem(log, target, result, error, time.perf_counter() - started))
-        report("failed" if error else "done", 1.0)
+    entries = collect_logs(list(logs), outages=outages)
+    chosen = ParamSet(method, params or Params(), method, "method", f"--method {method}")
+    plan = SweepPlan(entries, (chosen,), topics)
+    sink: Any
+    if progress is None:
+        sink = QuietProgress()
+    elif hasattr(progress, "advance"):
+        sink = progress
+    else:
+        sink = _CallbackProgress(progress)
+    run_sweep(
+        plan,
+        out,
+        workers=workers,
+        scheduler=scheduler,
+        export=replay,
+        export_layout="flat",
+        progress=sink,
+        cache_dir=cache_dir,
+        report=False,
+    )
+    layout = SweepLayout(out, "flat")
+    items = [
+        _item(task.log, layout.export_dir(task), read_task_file(layout.task_file(task)))
+        for task in plan.tasks()
+    ]
     summary = export_tables.write_summary(out / "summary.csv", items)
     return BatchResult(tuple(items), summary)
+
+
+def _item(entry: LogEntry, folder: Path, data: Mapping[str, Any] | None) -> BatchItem:
+    """A log's item from its task file (None: the task never finished)."""
+    if data is None:
+        return BatchItem(entry.log, folder, None, f"{entry.log}: no result", 0.0)
+    row, doc = data["row"], data.get("document")
+    seconds = float(row.get("total_s") or 0.0)
+    if row.get("status") != "ok" or not isinstance(doc, dict):
+        return BatchItem(entry.log, folder, None, str(row.get("error") or "failed"), seconds)
+    doc = dict(doc)
+    export = doc.pop("export", None) or {}
+    result = ExportResult(
+        log=entry.log,
+        route=Path(str(entry.route)),
+        out_dir=folder,
+        files=tuple(Path(f) for f in data.get("files", ())),
+        metrics=doc,
+        frames=int(export.get("frames", 0)),
+    )
+    return BatchItem(entry.log, folder, result, None, seconds)
+
+
+class _CallbackProgress:
+    """The engine's progress as ``progress(i, n, log, stage, fraction)`` calls."""
+
+    def __init__(self, callback: LegacyProgress) -> None:
+        self.callback = callback
+        self.total = self.done = 0
+
+    def start(self, *, total: int, done: int, failed: int, dashboard: str | None) -> None:
+        self.total, self.done = total, done
+
+    def advance(self, row: Mapping[str, Any]) -> None:
+        stage = "done" if row.get("status") == "ok" else "failed"
+        self.callback(self.done, self.total, Path(str(row["log"])), stage, 1.0)
+        self.done += 1
+
+    def close(self) -> None:
+        pass

@@ -98,13 +98,14 @@ def export_log(
     route_feature: str | int | None = None,
     replay: ReplayOptions = ReplayOptions(),
     progress: Progress | None = None,
+    cache_dir: Path | None = None,
 ) -> ExportResult:
     """Run the baseline and ``method`` over one log and write every export file into
     ``out_dir`` (created if missing; files of an earlier export are overwritten).
 
     ``outages``: (start, end) seconds after the log start where GNSS is removed, as
     ``routefuse run --outage``. ``route_feature``: which line of a route file holding several
-    (name or index)."""
+    (name or index). ``cache_dir``: the decoded-log cache (default: the user's)."""
     from estimator.pipeline import open_inputs, run_methods
 
     log_path, route_path, out = Path(log_path), Path(route_path), Path(out_dir)
@@ -118,6 +119,7 @@ def export_log(
         route_path,
         topics=topics,
         route_feature=route_feature,
+        cache_dir=cache_dir,
         progress=stage("loading", 0, 0.2),
     )
     lap("load_s")

@@ -1,0 +1,188 @@
+"""Sweeps on a real Dask cluster (a ``dask scheduler`` and ``dask worker`` processes on
+127.0.0.1): through ``routefuse sweep --scheduler``, resumed, past a corrupt log, and past a
+worker killed mid-sweep."""
+
+from __future__ import annotations
+
+import os
+import signal
+from pathlib import Path
+
+import pyarrow.parquet as pq
+import pytest
+
+from estimator.evaluation import method_metrics
+from estimator.params import Params, with_values
+from estimator.pipeline import open_inputs, run_methods
+from inspector.cli.main import main
+from inspector.fleet import SweepPlan, build_sets, collect_logs, run_sweep
+from inspector.fleet.engine import QuietProgress
+from tests.inspector.fleet.conftest import copy_drive
+
+HOSTILE = "<img src=x onerror=alert(1)>&'\""
+OUTAGE = "10:30"
+
+
+@pytest.fixture(scope="module")
+def cli_sweep(dask_cluster, short_drive, tmp_path_factory):
+    """``routefuse sweep`` of three logs (one named to attack the report) x two sets (the
+    second, named to attack it too, a shorter match window: it changes every log's figures)."""
+    root = tmp_path_factory.mktemp("cli")
+    data = root / "logs"
+    for stem in ("drive_a", "drive_b", HOSTILE):
+        copy_drive(short_drive, data, stem)
+    config = root / "<svg onload=alert(2)>.toml"
+    config.write_text("[window]\nlength_m = 100.0\n")
+    out = root / "out"
+    argv = ["sweep", str(data), "--out", str(out), "--scheduler", dask_cluster.address,
+            "--method", "proposed", "--config", str(config), "--outage", OUTAGE,
+            "--cache-dir", str(root / "cache"), "--quiet"]  # fmt: skip
+    code = main(argv)
+    return code, out, data, config
+
+
+def test_sweep_through_a_running_scheduler(cli_sweep):
+    code, out, data, _ = cli_sweep
+    assert code == 0
+    rows = pq.read_table(out / "results.parquet").to_pylist()
+    assert len(rows) == 6 and all(r["status"] == "ok" for r in rows)
+    assert {r["set"] for r in rows} == {"proposed", "<svg onload=alert(2)>"}
+    assert sorted(r["reference"] for r in rows) == [False] * 3 + [True] * 3
+    tuned = [r for r in rows if r["set"] != "proposed"]
+    assert all(r["differs"] == "window.length_m=100" for r in tuned)
+    assert all(r["param.window.length_m"] == 100.0 for r in tuned)
+    assert all(r["worker"] and r["worker_peak_rss_mb"] > 50 for r in rows)
+    assert all(r["outages"] == OUTAGE for r in rows)
+    # the row holds the figures routefuse run computes for that log and set
+    row = next(r for r in tuned if r["label"] == "drive_a")
+    params = with_values(Params(), {"window.length_m": 100.0})
+    inputs = open_inputs(data / "drive_a.mcap", data / "drive_a.route.geojson")
+    session = run_methods(inputs, params, outages=[(10.0, 30.0)])
+    assert inputs.route is not None
+    for method in ("baseline", "proposed"):
+        m = method_metrics(session[method], inputs.route, inputs.log, params=params)
+        assert row[f"{method}_rmse_pos_dev_m"] == pytest.approx(m.route.rmse_pos_dev_m)
+    assert row["rmse_pos_dev_m"] == row["proposed_rmse_pos_dev_m"]
+    attempts = len(session["proposed"].matches)
+    accepted = sum(r.accepted for r in session["proposed"].matches)
+    refused = sum(v for k, v in row.items() if k.startswith("refused_"))
+    assert (row["matches_attempted"], row["matches_accepted"]) == (attempts, accepted)
+    assert refused == attempts - accepted
+    # the CSV is the same table; the set's parameters are written for routefuse serve
+    csv_lines = (out / "results.csv").read_text().splitlines()
+    assert len(csv_lines) == 7 and csv_lines[0].startswith("task_id,log,label")
+    (tuned_toml,) = (out / "sets").glob("*svg*.toml")
+    assert "length_m = 100.0" in tuned_toml.read_text() and "<" not in tuned_toml.name
+
+
+def test_the_report_escapes_names_and_is_self_contained(cli_sweep):
+    _, out, _, _ = cli_sweep
+    page = (out / "report.html").read_text()
+    assert "<img src=x" not in page and "<svg onload" not in page
+    assert "&lt;img src=x onerror=alert(1)&gt;&amp;" in page
+    assert "&lt;svg onload=alert(2)&gt;" in page
+    assert "http://" not in page and "https://" not in page
+    assert "<script" not in page.lower()
+    assert page.count("src='data:image/png;base64,") >= 3  # the distributions, inline
+    # every (log, set) with a change is ranked with the command that opens it
+    assert "routefuse serve " in page and "--config" in page and f"--outage {OUTAGE}" in page
+
+
+def _plan(data: Path, *specs: tuple[str, str]) -> SweepPlan:
+    return SweepPlan(collect_logs([str(data)], outages=[(10.0, 30.0)]), build_sets(list(specs)))
+
+
+def test_a_second_run_skips_the_finished_tasks(dask_cluster, short_drive, tmp_path):
+    data = tmp_path / "logs"
+    copy_drive(short_drive, data, "drive")
+    plan = _plan(data, ("method", "proposed"), ("method", "paper"))
+    out = tmp_path / "out"
+    kwargs = {"scheduler": dask_cluster.address, "progress": QuietProgress(), "report": False}
+    first = run_sweep(plan, out, cache_dir=tmp_path / "cache", **kwargs)
+    assert (first.total, first.ran, first.skipped, first.failed) == (2, 2, 0, 0)
+    files = sorted((out / "tasks").glob("*.json"))
+    assert len(files) == 2
+    stamps = {f: f.stat().st_mtime_ns for f in files}
+    second = run_sweep(plan, out, cache_dir=tmp_path / "cache", **kwargs)
+    assert (second.ran, second.skipped) == (0, 2)
+    assert {f: f.stat().st_mtime_ns for f in files} == stamps
+    assert pq.read_table(second.parquet).num_rows == 2
+    files[0].unlink()
+    third = run_sweep(plan, out, cache_dir=tmp_path / "cache", **kwargs)
+    assert (third.ran, third.skipped) == (1, 1) and files[0].is_file()
+
+
+def test_a_corrupt_log_is_a_row_with_its_error(dask_cluster, short_drive, tmp_path):
+    data = tmp_path / "logs"
+    copy_drive(short_drive, data, "drive")
+    (data / "corrupt.mcap").write_bytes(b"\x89MCAP0\r\n" + b"\x00garbage" * 100)
+    (data / "corrupt.route.geojson").write_bytes((data / "drive.route.geojson").read_bytes())
+    plan = _plan(data, ("method", "proposed"), ("method", "paper"))
+    result = run_sweep(
+        plan,
+        tmp_path / "out",
+        scheduler=dask_cluster.address,
+        progress=QuietProgress(),
+        cache_dir=tmp_path / "cache",
+    )
+    assert (result.total, result.failed) == (4, 2)
+    rows = {(r["label"], r["set"]): r for r in pq.read_table(result.parquet).to_pylist()}
+    for s in ("proposed", "paper"):
+        bad, good = rows[("corrupt", s)], rows[("drive", s)]
+        assert bad["status"] == "failed" and "corrupt.mcap: " in bad["error"]
+        assert "\n" not in bad["error"] and "Traceback" not in bad["error"]
+        assert bad["rmse_pos_dev_m"] is None
+        assert good["status"] == "ok" and good["error"] == "" and good["rmse_pos_dev_m"] > 0
+    page = (tmp_path / "out" / "report.html").read_text()
+    assert "Failed tasks (2)" in page and "corrupt.mcap: " in page
+
+
+def test_a_worker_killed_mid_sweep_still_gives_every_row(dask_cluster, short_drive, tmp_path):
+    extra = dask_cluster.start_worker(nanny=False)
+    dask_cluster.wait_for_workers(3)
+    data = tmp_path / "logs"
+    for stem in ("a", "b", "c"):
+        copy_drive(short_drive, data, stem)
+    plan = _plan(data, ("method", "proposed"), ("method", "paper"))
+    killed = []
+
+    def kill_after_first_row(row: object) -> None:
+        if not killed:
+            os.kill(extra.pid, signal.SIGKILL)
+            killed.append(extra.pid)
+
+    result = run_sweep(
+        plan,
+        tmp_path / "out",
+        scheduler=dask_cluster.address,
+        progress=QuietProgress(),
+        cache_dir=tmp_path / "cache",
+        report=False,
+        on_row=kill_after_first_row,
+    )
+    assert killed and extra.wait(timeout=15) == -signal.SIGKILL
+    assert (result.total, result.failed) == (6, 0)
+    rows = pq.read_table(result.parquet).to_pylist()
+    assert len(rows) == 6 and all(r["status"] == "ok" for r in rows)
+
+
+def test_exports_are_linked_from_the_report_and_resumed(dask_cluster, short_drive, tmp_path):
+    from inspector.export.replay import ReplayOptions
+
+    data = tmp_path / "logs"
+    copy_drive(short_drive, data, "drive")
+    plan = _plan(data, ("method", "proposed"), ("method", "paper"))
+    out = tmp_path / "out"
+    kwargs = {"scheduler": dask_cluster.address, "progress": QuietProgress()}
+    replay = ReplayOptions(fps=0.5)
+    first = run_sweep(plan, out, cache_dir=tmp_path / "cache", export=replay, **kwargs)
+    assert (first.ran, first.failed) == (2, 0)
+    for s in ("proposed", "paper"):
+        assert (out / "exports" / s / "drive" / "replay.html").stat().st_size > 100_000
+    page = (out / "report.html").read_text()
+    assert "href='exports/paper/drive/replay.html'" in page
+    again = run_sweep(plan, out, cache_dir=tmp_path / "cache", export=replay, **kwargs)
+    assert (again.ran, again.skipped) == (0, 2)
+    # other replay options: the exports are written again
+    other = run_sweep(plan, out, cache_dir=tmp_path / "cache", export=ReplayOptions(), **kwargs)
+    assert other.ran == 2

@@ -1,0 +1,160 @@
+"""A sweep's plan: logs from folders, globs and a manifest CSV, parameter sets from configs, a
+grid and methods, the reference set, the values that differ from it, and stable task ids."""
+
+from __future__ import annotations
+
+from pathlib import Path
+
+import pytest
+
+from estimator.errors import ConfigError, RoutefuseError
+from estimator.params import Params, get_param, with_values
+from inspector.cli.main import build_parser
+from inspector.fleet import SweepPlan, build_sets, collect_logs, differing_values, expand_grid
+from inspector.fleet.plan import format_values, task_id
+
+
+def _touch(folder: Path, *names: str) -> None:
+    for name in names:
+        (folder / name).write_text("x")
+
+
+def test_logs_from_a_folder_a_glob_and_a_manifest(tmp_path):
+    _touch(tmp_path, "a.mcap", "a.route.geojson", "b.mcap", "b.route.gpx", "c.bag", "notes.txt")
+    sub = tmp_path / "sub"
+    sub.mkdir()
+    _touch(sub, "a.mcap", "a.route.geojson", "other.geojson")
+    manifest = tmp_path / "drives.csv"
+    manifest.write_text(
+        "log,route,outages,tags\nsub/a.mcap,sub/other.geojson,20:50 80:95,night;rain\nb.mcap,,,\n"
+    )
+    entries = collect_logs([str(tmp_path / "c.*"), str(tmp_path), str(manifest)], outages=[(5, 9)])
+    by_label = {e.label: e for e in entries}
+    # c.bag from the glob and again from the folder: once; a.mcap of two folders: two labels
+    assert sorted(by_label) == ["a", "a-2", "b", "c"]
+    assert by_label["c"].route is None and "no route c.route.geojson" in str(
+        by_label["c"].route_error
+    )
+    assert by_label["a"].route == (tmp_path / "a.route.geojson").absolute()
+    assert by_label["b"].route == (tmp_path / "b.route.gpx").absolute()  # any route format
+    assert by_label["a"].outages == ((5.0, 9.0),)  # the command's outages
+    from_manifest = by_label["a-2"]
+    assert from_manifest.log == (sub / "a.mcap").absolute()
+    assert from_manifest.route == (sub / "other.geojson").absolute()
+    assert from_manifest.outages == ((20.0, 50.0), (80.0, 95.0))
+    assert from_manifest.tags == ("night", "rain")
+    # b.mcap from the folder and the manifest row with no outages: the same task, once
+    assert [e.log.name for e in entries].count("b.mcap") == 1
+
+
+@pytest.mark.parametrize(
+    ("text", "message"),
+    [
+        ("log,route\nmissing.mcap,\n", "line 2: missing.mcap: no such file"),
+        ("log,weather\na.mcap,sunny\n", "unknown column 'weather'"),
+        ("log,outages\na.mcap,50:20\n", "line 2: outages"),
+        ("log,route\na.mcap,nowhere.geojson\n", "line 2: nowhere.geojson: no such route"),
+        ("log\n", "lists no log"),
+    ],
+)
+def test_manifest_errors_name_the_file_and_line(tmp_path, text, message):
+    _touch(tmp_path, "a.mcap")
+    manifest = tmp_path / "m.csv"
+    manifest.write_text(text)
+    with pytest.raises(ConfigError) as err:
+        collect_logs([str(manifest)])
+    assert str(err.value).startswith(str(manifest)) and message in str(err.value)
+    assert "\n" not in str(err.value)
+
+
+def test_no_logs_is_one_line(tmp_path):
+    with pytest.raises(RoutefuseError, match="no logs found"):
+        collect_logs([str(tmp_path / "nothing-*.mcap")])
+
+
+def test_grid_expands_every_combination_in_order():
+    sets = expand_grid(
+        {
+            "method": ["proposed", "paper"],
+            "gates": {"max_residual_m": [1.0, 2.5, 4.0]},
+            "window": {"length_m": 300.0},
+        },
+        source="grid.toml",
+    )
+    assert len(sets) == 6
+    assert [s.method for s in sets] == ["proposed"] * 3 + ["paper"] * 3
+    assert [get_param(s.params, "gates.max_residual_m") for s in sets] == [1.0, 2.5, 4.0] * 2
+    assert all(get_param(s.params, "window.length_m") == 300.0 for s in sets)
+    assert sets[0].name == "method=proposed,max_residual_m=1"
+    assert {s.kind for s in sets} == {"grid"}
+
+
+def test_grid_errors():
+    with pytest.raises(ConfigError, match=r"unknown parameter 'gates\.nope'"):
+        expand_grid({"gates": {"nope": [1, 2]}}, source="g.toml")
+    with pytest.raises(ConfigError, match="empty list"):
+        expand_grid({"gates": {"max_residual_m": []}}, source="g.toml")
+    with pytest.raises(ConfigError, match="max_residual_m"):
+        expand_grid({"gates": {"max_residual_m": [1.0, -5.0]}}, source="g.toml")
+    with pytest.raises(ConfigError, match="'fast' is not one of"):
+        expand_grid({"method": ["fast"]}, source="g.toml")
+
+
+def test_sets_in_command_line_order_the_first_is_the_reference(tmp_path):
+    tuned = tmp_path / "tuned.toml"
+    tuned.write_text("[gates]\nmax_residual_m = 2.25\n")
+    grid = tmp_path / "grid.toml"
+    grid.write_text("[window]\nlength_m = [250.0, 350.0]\n")
+    args = build_parser().parse_args(
+        ["sweep", "L", "--out", "o", "--method", "paper", "--config", str(tuned), "--grid",
+         str(grid), "--method", "paper"]
+    )  # fmt: skip
+    sets = build_sets(args.sets, base=with_values(Params(), {"trigger.min_outage_s": 2.0}))
+    assert [s.name for s in sets] == ["paper", "tuned", "length_m=250", "length_m=350", "paper-2"]
+    plan = SweepPlan(collect_logs([str(_log(tmp_path))]), sets)
+    assert plan.reference.name == "paper"
+    # --set is under every set; the files and the grid override it
+    assert all(get_param(s.params, "trigger.min_outage_s") == 2.0 for s in sets)
+    tuned_differs = plan.differing(sets[1])
+    assert tuned_differs["method"] == "proposed"
+    assert tuned_differs["gates.max_residual_m"] == 2.25
+    assert tuned_differs["extensions.portal_rerun"] is True  # paper switches extensions off
+    assert plan.differing(sets[0]) == {} and plan.differing(sets[4]) == {}
+    assert "window.length_m" in plan.varied_names() and plan.varied_names()[0] == "method"
+    assert format_values(plan.differing(sets[3])).startswith("method=proposed; ")
+
+
+def test_no_set_is_the_defaults_with_the_proposed_method():
+    (only,) = build_sets([])
+    assert only.method == "proposed" and only.params == Params()
+
+
+def test_differing_values_compares_what_the_methods_run():
+    a, b = build_sets([("method", "paper"), ("method", "proposed")])
+    assert differing_values(a, a) == {}
+    assert set(differing_values(b, a)) >= {"method", "extensions.portal_rerun"}
+
+
+def test_task_ids_are_stable_and_change_with_what_the_row_depends_on(tmp_path):
+    log = _log(tmp_path)
+    (entry,) = collect_logs([str(log)])
+    (s,) = build_sets([("method", "proposed")])
+    renamed = type(s)("another name", s.params, s.method, s.kind, s.source)
+    changed = type(s)(s.name, with_values(s.params, {"gates.max_residual_m": 2.0}), s.method)
+    (moved,) = collect_logs([str(log)], outages=[(1, 2)])
+    assert task_id(entry, s) == task_id(entry, renamed)
+    assert len({task_id(entry, s), task_id(entry, changed), task_id(moved, s)}) == 3
+    plan = SweepPlan((entry,), build_sets([("method", "proposed"), ("method", "paper")]))
+    ids = [t.id for t in plan.tasks()]
+    assert ids == [t.id for t in plan.tasks()] and len(set(ids)) == 2
+
+
+def test_hostile_names_become_safe_file_names():
+    (s,) = expand_grid({"gates": {"max_residual_m": 2.0}}, source="<b>/../x.toml")
+    assert "/" not in s.slug and "<" not in s.slug
+
+
+def _log(folder: Path) -> Path:
+    log = folder / "drive.mcap"
+    _touch(folder, "drive.mcap", "drive.route.geojson")
+    return log
