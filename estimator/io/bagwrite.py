@@ -16,7 +16,7 @@ from __future__ import annotations
 
 import shutil
 import tempfile
-from collections.abc import Callable, Sequence
+from collections.abc import Callable, Mapping, Sequence
 from dataclasses import dataclass
 from functools import cache
 from pathlib import Path
@@ -309,13 +309,15 @@ def write_bag(
     wheel_type: Literal["odometry", "twist"] = "odometry",
     imu_frame: str = "base_link",
     static_transforms: Sequence[StaticTransform] = (),
+    header_stamps: Mapping[Literal["imu", "gnss", "wheel"], NDArray[np.float64]] | None = None,
 ) -> dict[str, int]:
     """Write the given streams to one bag and return the message count per topic.
 
     ``storage="mcap"`` writes one bare ``.mcap`` file (ROS 2 bag v9, zstd chunks),
     ``"mcap-folder"`` and ``"sqlite3"`` a ROS 2 bag folder, ``"ros1"`` a ROS 1 ``.bag``.
     The receive time of each message is its header stamp; messages are written in time order
-    (ties by stream).
+    (ties by stream). ``header_stamps`` gives a stream header stamps of their own (a sensor
+    clock that jumps while the recorder's receive times, the streams' ``t``, run on).
     Arrays are written as given (NaN and duplicate stamps included), so tests can build bad logs.
     """
     out = Path(path)
@@ -327,19 +329,32 @@ def write_bag(
         t0 = min((int(f[0]) for f in first if len(f)), default=0)
         rows = _tf_static_rows(storage, static_transforms)
         streams.append((topics.tf_static, TF_TYPE, np.array([t0], np.int64), rows))
+    headers = dict(header_stamps or {})
+
+    def header(name: Literal["imu", "gnss", "wheel"], t_ns: NDArray[np.int64]) -> NDArray[np.int64]:
+        return _to_ns(headers[name], name) if name in headers else t_ns
+
     if imu is not None:
         t_ns = _to_ns(imu.t, "IMU")
-        streams.append((topics.imu, IMU_TYPE, t_ns, _imu_rows(storage, imu, t_ns, imu_frame)))
+        rows = _imu_rows(storage, imu, header("imu", t_ns), imu_frame)
+        streams.append((topics.imu, IMU_TYPE, t_ns, rows))
     if gnss is not None:
         t_ns = _to_ns(gnss.t, "GNSS")
         rows = _fix_rows(
-            storage, t_ns, gnss.lat, gnss.lon, gnss.alt, gnss.status, gnss.cov_enu, "gnss"
+            storage,
+            header("gnss", t_ns),
+            gnss.lat,
+            gnss.lon,
+            gnss.alt,
+            gnss.status,
+            gnss.cov_enu,
+            "gnss",
         )
         streams.append((topics.gnss, FIX_TYPE, t_ns, rows))
     if wheel is not None:
         t_ns = _to_ns(wheel.t, "wheel")
         wtype = TWIST_TYPE if wheel_type == "twist" else ODOM_TYPE
-        rows = _wheel_rows(storage, wheel, t_ns, wheel_type, "base_link")
+        rows = _wheel_rows(storage, wheel, header("wheel", t_ns), wheel_type, "base_link")
         streams.append((topics.wheel, wtype, t_ns, rows))
     if truth is not None:
         t_ns = _to_ns(truth.t, "truth")

@@ -3,6 +3,7 @@ in ``Log.warnings``, and the IMU rotated into the body frame."""
 
 from __future__ import annotations
 
+import itertools
 from pathlib import Path
 
 import numpy as np
@@ -25,6 +26,98 @@ MAX_ABS_ALTITUDE_M = 100_000.0
 IRREGULAR_FRACTION = 0.01
 """An IMU stream is reported as irregular when more than this fraction of its sample intervals
 is off the median interval by more than half of it (dropped samples, jittery stamps)."""
+JUMP_MIN_S = 1.0
+JUMP_MIN_INTERVALS = 50
+"""A step back in a stream's stamps of more than both is its clock jumping back, not samples
+arriving out of order."""
+ISOLATED_GAP_MIN_S = 10.0
+ISOLATED_GAP_INTERVALS = 1000
+"""Samples separated from the rest of their stream by more than both (and few: see
+:func:`_drop_isolated`) carry a corrupt stamp."""
+SAME_JUMP_S = 1.0
+"""Streams whose clocks jump back within this of each other jumped together (one clock)."""
+
+
+def _median_step(t: F64) -> float:
+    dt = np.diff(t)
+    dt = dt[np.isfinite(dt) & (dt > 0)]
+    return float(np.median(dt)) if len(dt) else 0.0
+
+
+def _mend_jumps(name: str, t: F64, warnings: list[str], shared: list[float]) -> F64:
+    """A clock that jumps back (an NTP step, a recorder restart) leaves the samples after the
+    jump stamped earlier than those before it: sorted by stamp, two stretches of the drive would
+    interleave, and without sorting every sample after the jump is behind its predecessor. The
+    samples after each jump are moved forward to continue the stream at its median rate (all of
+    the data is kept). ``shared``: the shifts of the streams mended before; a stream that jumps
+    by about the same (one clock for all) takes that shift, so the streams stay paired to the
+    IMU's resolution, not to their own sample interval."""
+    step = _median_step(t)
+    if step <= 0:
+        return t
+    d = np.diff(t)
+    jumps = np.flatnonzero(d < -max(JUMP_MIN_S, JUMP_MIN_INTERVALS * step))
+    if not len(jumps):
+        return t
+    t = t.copy()
+    for k in jumps:
+        if _outlier_around(t, int(k), JUMP_MIN_INTERVALS * step):
+            continue
+        back = float(t[k] - t[k + 1])
+        shift = back + step
+        same = [x for x in shared if abs(x - shift) < SAME_JUMP_S]
+        if same:
+            shift = same[0]
+        else:
+            shared.append(shift)
+        warnings.append(
+            f"{name}: clock jumps back {back:.3f} s after {t[k] - t[0]:.3f} s of the stream; "
+            f"the {len(t) - k - 1} samples after the jump moved {shift:.3f} s forward to "
+            "continue it (data kept)"
+        )
+        t[k + 1 :] += shift
+    return t
+
+
+def _outlier_around(t: F64, k: int, near: float, most: int = 4) -> bool:
+    """Whether the step back between samples k and k+1 is a few corrupt stamps (ahead of the
+    stream before it, or behind it after) rather than the clock jumping: the stream resumes
+    within ``near`` of where it was after at most ``most`` samples."""
+    n = len(t)
+    for m in range(1, most + 1):
+        if k + 1 + m < n and 0 < t[k + 1 + m] - t[k] <= near:
+            return True
+        if k - m >= 0 and 0 < t[k + 1] - t[k - m] <= near:
+            return True
+    return False
+
+
+def _drop_isolated(name: str, t: F64, v: F64, warnings: list[str]) -> tuple[F64, F64]:
+    """A single corrupt stamp (a sample years away, or at t = 1 s) would stretch the stream's
+    span over years: the log's start, its frame's time base and every buffer sized from the
+    span would follow it. Stretches of at most max(3, 0.1 %) samples set apart from the rest by
+    a gap of more than max(10 s, 1000 sample intervals) are dropped, each named."""
+    if len(t) < 8:
+        return t, v
+    step = _median_step(t)
+    gap = max(ISOLATED_GAP_MIN_S, ISOLATED_GAP_INTERVALS * step)
+    cuts = np.flatnonzero(np.diff(t) > gap) + 1
+    if not len(cuts):
+        return t, v
+    bounds = np.r_[0, cuts, len(t)]
+    small = max(3, len(t) // 1000)
+    keep = np.ones(len(t), bool)
+    for a, b in itertools.pairwise(bounds):
+        if b - a <= small:
+            keep[a:b] = False
+            stamps = ", ".join(f"{x:.3f}" for x in t[a:b][:3])
+            warnings.append(
+                f"{name}: dropped {b - a} samples stamped far from the rest of the stream "
+                f"(corrupt stamps: {stamps} s)"
+            )
+    if keep.all() or not keep.any():
+        return t, v
+    return t[keep], v[keep]
 
 
 def _clean(
@@ -35,7 +128,10 @@ def _clean(
     *,
     drop_nonfinite: bool,
     limits: tuple[float, ...] | None = None,
+    jumps: list[float] | None = None,
 ) -> tuple[F64, F64]:
+    if jumps is not None:
+        t = _mend_jumps(name, t, warnings, jumps)
     order = np.argsort(t, kind="stable")
     if np.any(order != np.arange(len(t))):
         moved = int(np.count_nonzero(np.diff(t) < 0))
@@ -45,6 +141,7 @@ def _clean(
     if dup.any():
         warnings.append(f"{name}: dropped {int(dup.sum())} samples with a repeated stamp")
         t, v = t[~dup], v[~dup]
+    t, v = _drop_isolated(name, t, v, warnings)
     bad = ~np.isfinite(t)
     if drop_nonfinite:
         bad |= ~np.all(np.isfinite(v), axis=1)
@@ -78,9 +175,13 @@ def _note_irregular(name: str, t: F64, warnings: list[str]) -> None:
         )
 
 
-def _imu(path: Path, roles: TopicRoles, raw: Decoded, warnings: list[str]) -> ImuData:
+def _imu(
+    path: Path, roles: TopicRoles, raw: Decoded, warnings: list[str], jumps: list[float]
+) -> ImuData:
     t, v, imu_frame = raw.streams["imu"]
-    t, v = _clean(f"IMU {roles.imu}", t, v, warnings, drop_nonfinite=True, limits=IMU_LIMITS)
+    t, v = _clean(
+        f"IMU {roles.imu}", t, v, warnings, drop_nonfinite=True, limits=IMU_LIMITS, jumps=jumps
+    )
     if len(t) < MIN_IMU_SAMPLES:
         raise LogError(
             path, f"too few IMU samples on {roles.imu}: {len(t)} (need at least {MIN_IMU_SAMPLES})"
@@ -132,9 +233,12 @@ def assemble(
 ) -> Log:
     """The repaired :class:`Log` of what :func:`estimator.io.decode.decode` read."""
     warnings: list[str] = []
-    imu = _imu(path, roles, raw, warnings)
+    jumps: list[float] = []
+    imu = _imu(path, roles, raw, warnings, jumps)
 
-    gt, gv = _clean(f"GNSS {roles.gnss}", *raw.streams["gnss"][:2], warnings, drop_nonfinite=False)
+    gt, gv = _clean(
+        f"GNSS {roles.gnss}", *raw.streams["gnss"][:2], warnings, drop_nonfinite=False, jumps=jumps
+    )
     if len(gt) == 0:
         raise LogError(path, f"GNSS topic {roles.gnss} has no messages")
     gnss = _gnss(gt, gv, f"GNSS {roles.gnss}", warnings)
@@ -150,6 +254,7 @@ def assemble(
             warnings,
             drop_nonfinite=True,
             limits=(WHEEL_LIMIT,),
+            jumps=jumps,
         )
         wheel = WheelData(wt, wv[:, 0].copy()) if len(wt) else None
 
