@@ -10,6 +10,7 @@ import numpy as np
 from numpy.typing import NDArray
 
 from estimator.errors import LogError
+from estimator.io import plausibility
 from estimator.io.decode import Decoded, rotation_between
 from estimator.io.topics import TopicRoles
 from estimator.log import GnssData, ImuData, Log, TopicInfo, TruthData, WheelData
@@ -263,7 +264,9 @@ def assemble(
         TopicInfo(topic, types[topic], counts[topic], roles.role_of(topic))
         for topic in sorted(types)
     )
-    return Log(str(path), imu, gnss, wheel, truth, topics, tuple(warnings))
+    return plausibility.checked(
+        path, Log(str(path), imu, gnss, wheel, truth, topics, tuple(warnings))
+    )
 
 
 def _check_shared_clock(path: Path, imu_t: F64, gnss_t: F64) -> None:

@@ -28,6 +28,7 @@ import numpy as np
 from numpy.typing import NDArray
 
 from estimator.errors import LogError, RoutefuseError
+from estimator.evaluation.metrics import interval_mask
 from estimator.filter.engine import Filter, epochs_of
 from estimator.filter.gnss import widen_heading
 from estimator.filter.kernel import finite_state
@@ -150,8 +151,37 @@ def run(
         dropped_fix_times=tuple(driver.dropped_fixes),
         warnings=tuple(log.warnings)
         + inputs.warnings
-        + (route.warnings if route is not None else ()),
+        + (route.warnings if route is not None else ())
+        + gnss_acceptance_warnings(log, epochs, inputs.degraded),
         _reuse=state,
+    )
+
+
+MIN_GNSS_ACCEPTANCE = 0.5
+
+
+def gnss_acceptance_warnings(
+    log: Log, epochs: Epochs, degraded: Sequence[tuple[float, float]]
+) -> tuple[str, ...]:
+    """A filter that uses few of the fixes it is given outside the outages disagrees with its
+    own GNSS: fix variances that lie, a wrong lever arm or IMU mounting, clocks apart, a bad
+    start. Counted per output row (a fix used since the previous row), against the rows or the
+    valid fixes there, whichever is fewer."""
+    g = log.gnss
+    outside = ~interval_mask(g.t, degraded) & (g.t >= epochs.t[0]) & (g.t <= epochs.t[-1])
+    fixes = int(np.count_nonzero(g.valid & outside))
+    rows = ~interval_mask(epochs.t, degraded)
+    expected = min(fixes, int(np.count_nonzero(rows)))
+    if expected < 20:
+        return ()
+    used = int(np.count_nonzero(epochs.gnss_used & rows))
+    if used >= MIN_GNSS_ACCEPTANCE * expected:
+        return ()
+    return (
+        f"GNSS: the filter used only {100 * used / expected:.0f} % of the fixes outside the "
+        f"outages ({fixes} valid): the fixes disagree with the IMU and the wheel speed (fix "
+        "variances that lie, a wrong lever arm or IMU mounting, IMU and GNSS clocks apart, or a "
+        "bad start)",
     )
 
 

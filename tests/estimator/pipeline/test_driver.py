@@ -341,3 +341,19 @@ def test_overlapping_windows_count_their_along_track_evidence_once():
     assert checked >= 3
     off = [m for m in runs["proposed"].matches if m.accepted and m.along_observed]
     assert off and all(along_var(m) == pytest.approx(m.fit.along_sigma_m**2, rel=0.05) for m in off)
+
+
+def test_a_filter_that_refuses_most_of_its_fixes_says_so(tunnel, tunnel_proposed):
+    from estimator.pipeline.driver import gnss_acceptance_warnings
+
+    log, _, _ = tunnel
+    run_ = tunnel_proposed
+    assert gnss_acceptance_warnings(log, run_.epochs, run_.degraded_intervals) == ()
+    used = run_.epochs.gnss_used.copy()
+    used[np.flatnonzero(used)[::5]] = False  # a fifth more refused: still most
+    most = dataclasses.replace(run_.epochs, gnss_used=used)
+    assert gnss_acceptance_warnings(log, most, run_.degraded_intervals) == ()
+    used[np.flatnonzero(used)[: int(0.8 * used.sum())]] = False
+    few = dataclasses.replace(run_.epochs, gnss_used=used)
+    (warning,) = gnss_acceptance_warnings(log, few, run_.degraded_intervals)
+    assert warning.startswith("GNSS: the filter used only ") and "outside the outages" in warning

@@ -1,0 +1,253 @@
+"""Data that is finite but cannot be right: the unit and sign mistakes, dead sensors and clock
+offsets that would otherwise give a confident wrong answer without a word.
+
+Each check compares a stream with physics or with another stream, and says what it found with
+the likely cause: the IMU's specific force at rest is gravity (9.81 m/s^2, about 1 when the
+driver reports g); its yaw rate follows the GNSS course rate (57 times it in deg/s, with the
+opposite sign in a NED or FRD frame, shifted in time when the clocks disagree); the wheel
+speed follows the GNSS speed (3.6 times it in km/h, its negative with the wrong sign); a fix's
+variance lies between a millimetre and a kilometre squared. A log no estimate can be made from
+(a dead IMU, accelerations in g, rates in deg/s) is refused in one line; the rest is repaired
+where the repair is sure (a wheel stream in other units is left out, fixes that claim a
+kilometre of variance are no fixes) and warned about, with the span affected.
+"""
+
+from __future__ import annotations
+
+import dataclasses
+import math
+from pathlib import Path
+
+import numpy as np
+from numpy.typing import NDArray
+
+from estimator.errors import LogError
+from estimator.log import GnssData, Log
+from estimator.nav.frames import LocalFrame
+
+F64 = NDArray[np.float64]
+
+GRAVITY = 9.80665
+G_UNITS = (0.6, 1.6)
+"""median |specific force| in this range: the accelerations are in g"""
+PLAUSIBLE_GRAVITY = (7.0, 13.0)
+MOVING_M_S = 3.0
+MIN_TURN_RAD = 3.0
+"""summed |course change| over the windows needed to judge the gyro's units, sign and timing"""
+MAX_SPEED_JUMP_M_S = 3.0
+"""a step whose speed differs more from its neighbours' holds a jumping fix"""
+MIN_TURN_WINDOW_RAD = 0.15
+"""windows turning less than this say nothing about the gyro's scale"""
+TURN_OUTLIER_RAD = 0.3
+TURN_STEPS = 5
+"""course changes are taken over this many ~1 s steps"""
+DEG_S_RATIO = (20.0, 120.0)
+"""gyro yaw rate / GNSS course rate in this range: the rates are in deg/s (57.3)"""
+MAX_LAG_S = 1.0
+LAG_STEP_S = 0.02
+LAG_WARN_S = 0.2
+MIN_LAG_CORRELATION = 0.7
+WHEEL_UNITS = {"km/h": (3.3, 3.9), "mph": (2.1, 2.4), "the wrong sign": (-1.3, -0.7)}
+WHEEL_RATIO_OK = (0.8, 1.25)
+MIN_WHEEL_PAIRS = 20
+VARIANCE_CEILING_M2 = 1e6
+VARIANCE_FLOOR_M2 = 1e-6
+
+
+@dataclasses.dataclass(frozen=True)
+class _GnssMotion:
+    """Speed and course between valid fixes about a second apart."""
+
+    t: F64
+    """mid-times"""
+    dt: F64
+    speed: F64
+    course: F64
+    moving: NDArray[np.bool_]
+
+    def turns(self, span: int = TURN_STEPS) -> tuple[F64, F64, F64]:
+        """(start, end, course change) over ``span`` consecutive moving steps: a turn seen
+        over seconds stands out of the fixes' noise, a one-second course rate does not."""
+        run = np.convolve(self.moving.astype(np.int64), np.ones(span + 1, np.int64), "valid")
+        k = np.flatnonzero(run == span + 1)  # every step from k to k + span moving, no gap
+        turn = np.angle(np.exp(1j * (self.course[k + span] - self.course[k])))
+        return self.t[k], self.t[k + span], turn
+
+
+def checked(path: Path, log: Log) -> Log:
+    """``log`` with the warnings of every check added (and a wheel stream in the wrong units
+    left out, fixes with a kilometre of variance made no fixes); refused when no estimate can
+    be meaningful."""
+    warnings: list[str] = []
+    _imu_alive(path, log)
+    _gravity(path, log, warnings)
+    gnss = _variances(log, warnings)
+    log = dataclasses.replace(log, gnss=gnss)
+    motion = _gnss_motion(log)
+    if motion is not None:
+        _gyro(path, log, motion, warnings)
+        if log.wheel is not None and not _wheel_plausible(log, motion, warnings):
+            log = dataclasses.replace(log, wheel=None)
+    if not warnings:
+        return log
+    return dataclasses.replace(log, warnings=(*log.warnings, *warnings))
+
+
+def _span(log: Log, t: F64) -> str:
+    t0 = log.t_start
+    return f"{float(t.min()) - t0:.1f}-{float(t.max()) - t0:.1f} s"
+
+
+def _imu_alive(path: Path, log: Log) -> None:
+    v = np.hstack([log.imu.gyro, log.imu.accel])
+    if not np.any(v):
+        raise LogError(path, "IMU: every sample is zero (a dead or unconnected sensor)")
+    if np.all(np.ptp(v, axis=0) == 0):
+        raise LogError(path, "IMU: every sample is the same (a frozen sensor)")
+
+
+def _gravity(path: Path, log: Log, warnings: list[str]) -> None:
+    f = float(np.median(np.linalg.norm(log.imu.accel, axis=1)))
+    if G_UNITS[0] <= f <= G_UNITS[1]:
+        raise LogError(
+            path,
+            f"IMU accelerations look like g, not m/s^2 (median |f| = {f:.2f}, gravity is "
+            f"{GRAVITY:.2f} m/s^2): scale linear_acceleration by {GRAVITY}",
+        )
+    if not PLAUSIBLE_GRAVITY[0] <= f <= PLAUSIBLE_GRAVITY[1]:
+        warnings.append(
+            f"IMU: median |specific force| {f:.2f} m/s^2, far from gravity's {GRAVITY:.2f}: "
+            "wrong units or a faulty accelerometer"
+        )
+
+
+def _variances(log: Log, warnings: list[str]) -> GnssData:
+    g = log.gnss
+    cov = g.cov_enu
+    with np.errstate(invalid="ignore"):
+        huge = g.valid & np.any(cov > VARIANCE_CEILING_M2, axis=1)
+        tiny = g.valid & np.any(cov < VARIANCE_FLOOR_M2, axis=1)
+    if tiny.any():
+        warnings.append(
+            f"GNSS: {int(tiny.sum())} fixes claim a variance below {VARIANCE_FLOOR_M2:g} m^2 "
+            f"(at {_span(log, g.t[tiny])}); the filter's noise.gnss_sigma_floor_m applies"
+        )
+    if not huge.any():
+        return g
+    warnings.append(
+        f"GNSS: {int(huge.sum())} fixes claim a variance above {VARIANCE_CEILING_M2:g} m^2 "
+        f"(a kilometre; at {_span(log, g.t[huge])}): treated as no fix"
+    )
+    status = g.status.copy()
+    status[huge] = -1
+    return dataclasses.replace(g, status=status)
+
+
+def _gnss_motion(log: Log) -> _GnssMotion | None:
+    g = log.gnss
+    ok = g.valid
+    if np.count_nonzero(ok) < 10:
+        return None
+    # about one fix a second: at 5-20 Hz a metre of fix noise over a few metres of travel is
+    # tenths of a radian of course, and its rate would be noise
+    t_all = g.t[ok]
+    pick = np.flatnonzero(np.diff(np.floor(t_all - t_all[0]), prepend=-1.0) > 0)
+    t = t_all[pick]
+    lat, lon, alt = g.lat[ok][pick], g.lon[ok][pick], g.alt[ok][pick]
+    if len(t) < 10:
+        return None
+    xy = LocalFrame.at(lat, lon, alt).to_enu(lat, lon)[:, :2]
+    dt = np.diff(t)
+    step = np.diff(xy, axis=0)
+    close = (dt > 0) & (dt <= 2.5)
+    speed = np.where(close, np.hypot(*step.T) / np.where(close, dt, 1.0), np.nan)
+    course = np.unwrap(np.arctan2(step[:, 1], step[:, 0]))
+    # a fix that jumps (re-acquisition after a tunnel, multipath) shows as a speed jump
+    steady = np.abs(np.diff(speed, prepend=np.nan)) < MAX_SPEED_JUMP_M_S
+    steady &= np.abs(np.diff(speed, append=np.nan)) < MAX_SPEED_JUMP_M_S
+    moving = close & (speed > MOVING_M_S) & steady
+    return _GnssMotion(0.5 * (t[1:] + t[:-1]), dt, speed, course, moving)
+
+
+def _mean_over(t: F64, v: F64, t0: F64, t1: F64) -> F64:
+    """Mean of a sampled signal over each interval (its running integral's difference)."""
+    c = np.r_[0.0, np.cumsum(0.5 * (v[1:] + v[:-1]) * np.diff(t))]
+    width = np.maximum(t1 - t0, 1e-9)
+    out: F64 = (np.interp(t1, t, c) - np.interp(t0, t, c)) / width
+    return out
+
+
+def _gyro(path: Path, log: Log, m: _GnssMotion, warnings: list[str]) -> None:
+    t0, t1, turn = m.turns()
+    inside = (t0 > log.imu.t[0] + MAX_LAG_S) & (t1 < log.imu.t[-1] - MAX_LAG_S)
+    t0, t1, turn = t0[inside], t1[inside], turn[inside]
+    if np.sum(np.abs(turn)) < MIN_TURN_RAD:
+        return
+    it = log.imu.t
+    yaw_rate = log.imu.gyro[:, 2]
+    heading = np.r_[0.0, np.cumsum(0.5 * (yaw_rate[1:] + yaw_rate[:-1]) * np.diff(it))]
+
+    def imu_turn(shift: float) -> F64:
+        out: F64 = np.interp(t1 + shift, it, heading) - np.interp(t0 + shift, it, heading)
+        return out
+
+    g = imu_turn(0.0)
+    turning = np.abs(turn) > MIN_TURN_WINDOW_RAD
+    if np.count_nonzero(turning) < 5:
+        return
+    ratio = float(np.median(g[turning] / turn[turning]))
+    if DEG_S_RATIO[0] <= abs(ratio) <= DEG_S_RATIO[1]:
+        raise LogError(
+            path,
+            f"IMU angular rates look like deg/s, not rad/s (its heading turns {abs(ratio):.0f} "
+            "times the GNSS course): scale angular_velocity by pi/180",
+        )
+    if ratio < -0.5:
+        warnings.append(
+            f"IMU: yaw rate has the opposite sign of the GNSS course's turns (ratio {ratio:.2f}): "
+            "the IMU axes are not forward-left-up (an FRD or NED IMU?); fix the driver's frame "
+            "or its /tf_static"
+        )
+        return
+    if ratio < 0.3:
+        return
+    inliers = np.abs(turn - g / ratio) < TURN_OUTLIER_RAD
+    t0, t1, turn = t0[inliers], t1[inliers], turn[inliers]
+    shifts = np.arange(-MAX_LAG_S, MAX_LAG_S + 1e-9, LAG_STEP_S)
+    corr = np.array([_correlation(imu_turn(s), turn) for s in shifts])
+    best = int(np.nanargmax(corr))
+    lag = float(shifts[best])
+    if corr[best] >= MIN_LAG_CORRELATION and abs(lag) >= LAG_WARN_S:
+        late = "late" if lag > 0 else "early"
+        warnings.append(
+            f"IMU stamps look {abs(lag):.2f} s {late} against GNSS (its turns match the GNSS "
+            f"course's best shifted by {lag:+.2f} s, correlation {corr[best]:.2f}): set "
+            f"sensors.gnss_time_offset_s = {lag:.2f} if the GNSS stamps are the late ones"
+        )
+
+
+def _correlation(a: F64, b: F64) -> float:
+    a, b = a - a.mean(), b - b.mean()
+    den = math.sqrt(float(a @ a) * float(b @ b))
+    return float(a @ b) / den if den > 0 else math.nan
+
+
+def _wheel_plausible(log: Log, m: _GnssMotion, warnings: list[str]) -> bool:
+    w = log.wheel
+    assert w is not None
+    sel = m.moving & (m.t >= w.t[0]) & (m.t <= w.t[-1])
+    if np.count_nonzero(sel) < MIN_WHEEL_PAIRS:
+        return True
+    ws = _mean_over(w.t, w.speed, m.t[sel] - m.dt[sel] / 2, m.t[sel] + m.dt[sel] / 2)
+    ratio = float(np.median(ws / m.speed[sel]))
+    if WHEEL_RATIO_OK[0] <= ratio <= WHEEL_RATIO_OK[1]:
+        return True
+    cause = next(
+        (name for name, (lo, hi) in WHEEL_UNITS.items() if lo <= ratio <= hi),
+        "a wrong unit or scale",
+    )
+    warnings.append(
+        f"wheel speed is {ratio:.2f} times the GNSS speed while moving (looks like {cause}, "
+        f"over {_span(log, m.t[sel])}): the wheel stream is left out (IMU and GNSS only)"
+    )
+    return False

@@ -1,0 +1,91 @@
+"""Finite data that cannot be right (issue 16): dead sensors, unit and sign mistakes, an IMU
+late against GNSS, absurd fix variances. Each is refused in one line where no estimate can be
+meaningful, else warned about with its likely cause (:mod:`estimator.io.plausibility`); a
+clean drive and the bundled samples raise no alarm."""
+
+from __future__ import annotations
+
+import dataclasses
+from pathlib import Path
+
+import numpy as np
+import pytest
+from _badinputs import base_sim, write_log
+
+from estimator.errors import LogError
+from estimator.io import load_log
+from estimator.log import Log
+
+SAMPLES = Path(__file__).resolve().parents[2] / "sample_logs"
+
+
+def _load(tmp_path: Path, **streams: object) -> Log:
+    return load_log(write_log(tmp_path / "drive.mcap", **streams), cache_dir=tmp_path / "cache")
+
+
+def _imu(**arrays: np.ndarray) -> object:
+    return dataclasses.replace(base_sim().imu, **arrays)
+
+
+def test_a_clean_drive_raises_no_alarm(tmp_path: Path) -> None:
+    assert _load(tmp_path).warnings == ()
+
+
+@pytest.mark.parametrize("name", ["long_tunnel", "spiral_tunnel", "multi_tunnel", "monaco_tunnel"])
+def test_the_samples_raise_no_alarm(tmp_path: Path, name: str) -> None:
+    assert load_log(SAMPLES / f"{name}.mcap", cache_dir=tmp_path).warnings == ()
+
+
+@pytest.mark.parametrize(
+    ("change", "problem"),
+    [
+        (lambda imu: {"gyro": 0 * imu.gyro, "accel": 0 * imu.accel}, "every sample is zero"),
+        (lambda imu: {"accel": imu.accel / 9.80665}, "accelerations look like g"),
+        (lambda imu: {"gyro": np.degrees(imu.gyro)}, "angular rates look like deg/s"),
+    ],
+    ids=["dead IMU", "accelerations in g", "rates in deg/s"],
+)
+def test_an_imu_no_estimate_can_use_is_refused_in_one_line(
+    tmp_path: Path, change, problem: str
+) -> None:
+    imu = base_sim().imu
+    with pytest.raises(LogError) as info:
+        _load(tmp_path, imu=_imu(**change(imu)))
+    text = str(info.value)
+    assert problem in text and "\n" not in text and str(tmp_path / "drive.mcap") in text
+
+
+def test_a_mirrored_yaw_rate_is_named(tmp_path: Path) -> None:
+    gyro = base_sim().imu.gyro * np.array([1.0, 1.0, -1.0])
+    log = _load(tmp_path, imu=_imu(gyro=gyro))
+    assert any("opposite sign" in w and "forward-left-up" in w for w in log.warnings)
+
+
+def test_an_imu_half_a_second_late_is_measured(tmp_path: Path) -> None:
+    imu = base_sim().imu
+    log = _load(tmp_path, imu=_imu(t=imu.t + 0.5))
+    late = [w for w in log.warnings if "s late against GNSS" in w]
+    assert len(late) == 1
+    lag = float(late[0].split("look ")[1].split(" s")[0])
+    assert lag == pytest.approx(0.5, abs=0.08)
+
+
+@pytest.mark.parametrize(
+    ("factor", "cause"), [(3.6, "km/h"), (-1.0, "the wrong sign")], ids=["km/h", "sign"]
+)
+def test_a_wheel_speed_in_other_units_is_named_and_left_out(
+    tmp_path: Path, factor: float, cause: str
+) -> None:
+    wheel = base_sim().wheel
+    log = _load(tmp_path, wheel=dataclasses.replace(wheel, speed=factor * wheel.speed))
+    assert log.wheel is None
+    assert any(f"looks like {cause}" in w and "left out" in w for w in log.warnings)
+
+
+def test_fixes_claiming_a_kilometre_of_variance_are_no_fixes(tmp_path: Path) -> None:
+    gnss = base_sim().gnss
+    cov = gnss.cov_enu.copy()
+    cov[100:150] = 1e30
+    log = _load(tmp_path, gnss=dataclasses.replace(gnss, cov_enu=cov))
+    assert not log.gnss.valid[100:150].any() and log.gnss.valid[150:200].any()
+    assert any("50 fixes claim a variance above" in w for w in log.warnings)
