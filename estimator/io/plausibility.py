@@ -79,7 +79,7 @@ def checked(path: Path, log: Log) -> Log:
     left out, fixes with a kilometre of variance made no fixes); refused when no estimate can
     be meaningful."""
     warnings: list[str] = []
-    _imu_alive(path, log)
+    _imu_alive(path, log, warnings)
     _gravity(path, log, warnings)
     gnss = _variances(log, warnings)
     log = dataclasses.replace(log, gnss=gnss)
@@ -98,12 +98,14 @@ def _span(log: Log, t: F64) -> str:
     return f"{float(t.min()) - t0:.1f}-{float(t.max()) - t0:.1f} s"
 
 
-def _imu_alive(path: Path, log: Log) -> None:
+def _imu_alive(path: Path, log: Log, warnings: list[str]) -> None:
     v = np.hstack([log.imu.gyro, log.imu.accel])
     if not np.any(v):
         raise LogError(path, "IMU: every sample is zero (a dead or unconnected sensor)")
     if np.all(np.ptp(v, axis=0) == 0):
-        raise LogError(path, "IMU: every sample is the same (a frozen sensor)")
+        warnings.append(
+            "IMU: every sample is the same, without any noise (a frozen sensor, or simulated)"
+        )
 
 
 def _gravity(path: Path, log: Log, warnings: list[str]) -> None:

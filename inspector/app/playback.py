@@ -45,7 +45,25 @@ def status_markdown(s: Session) -> str:
     if s.outages:
         text += f" · GNSS removed {format_outages(s.outages)} s"
     off = s.off_route.summary() if s.off_route is not None else ""
-    return f"{text} · {off}" if off else text
+    text = f"{text} · {off}" if off else text
+    return text + warnings_markdown(s.proposed.warnings)
+
+
+MAX_WARNINGS_SHOWN = 5
+MAX_WARNING_CHARS = 300
+
+
+def warnings_markdown(warnings: tuple[str, ...]) -> str:
+    """The log's warnings below the status line (what was repaired or looks wrong), escaped
+    and bounded; empty without any."""
+    if not warnings:
+        return ""
+    unique = tuple(dict.fromkeys(warnings))
+    lines = [f"- {markdown_text(w[:MAX_WARNING_CHARS])}" for w in unique[:MAX_WARNINGS_SHOWN]]
+    if len(unique) > MAX_WARNINGS_SHOWN:
+        lines.append(f"- and {len(unique) - MAX_WARNINGS_SHOWN} more (`routefuse info` lists all)")
+    head = f"\n\n⚠ **{len(unique)} warning{'s' if len(unique) > 1 else ''} about this log**"
+    return head + " (repaired or looking wrong):\n\n" + "\n".join(lines)
 
 
 def _report_failure(done: Future[None]) -> None:

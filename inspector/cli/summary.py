@@ -79,6 +79,12 @@ def _path_length(xy: NDArray[np.float64]) -> float:
     return float(np.sum(np.hypot(*np.diff(xy, axis=0).T))) if len(xy) > 1 else 0.0
 
 
+def _has_gaps(log: Log) -> bool:
+    """Valid fixes more than 2 s apart: the fixes' path cuts across the gap."""
+    t = log.gnss.t[log.gnss.valid]
+    return len(t) > 1 and bool(np.max(np.diff(t)) > 2.0)
+
+
 def distances_travelled(log: Log, frame: LocalFrame | None) -> tuple[tuple[str, float], ...]:
     """Distance travelled by every source the log has, each named (positions need a frame)."""
     out: list[tuple[str, float]] = []
@@ -95,7 +101,10 @@ def distances_travelled(log: Log, frame: LocalFrame | None) -> tuple[tuple[str, 
         enu = frame.to_enu(log.gnss.lat[ok], log.gnss.lon[ok], log.gnss.alt[ok])[:, :2]
         kernel = np.ones(SMOOTHING_FIXES) / SMOOTHING_FIXES
         smooth = np.column_stack([np.convolve(enu[:, i], kernel, "valid") for i in range(2)])
-        out.append((f"GNSS fixes, {SMOOTHING_FIXES}-fix moving average", _path_length(smooth)))
+        gaps = " (outages crossed in a straight line)" if _has_gaps(log) else ""
+        out.append(
+            (f"GNSS fixes, {SMOOTHING_FIXES}-fix moving average{gaps}", _path_length(smooth))
+        )
     if frame is not None and log.truth is not None:
         tr = log.truth
         enu = frame.to_enu(tr.lat, tr.lon, tr.alt)[:, :2]
@@ -194,7 +203,7 @@ def format_summary(s: LogSummary) -> str:
             f"95% {r.distance_p95_m:.1f} m, max {r.distance_max_m:.1f} m"
         )
     for w in s.warnings:
-        out.append(f"note      {w}")
+        out.append(f"warning   {w}")
     return "\n".join(out)
 
 

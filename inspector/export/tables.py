@@ -382,6 +382,7 @@ SUMMARY_COLUMNS = (
     "seconds",
     "folder",
     "error",
+    "warnings",
 )
 
 
@@ -407,6 +408,7 @@ def summary_rows(items: Sequence[BatchItem]) -> list[dict[str, str]]:
                 outage_s=_cell(sum(b - a for a, b in doc["degraded_intervals"])),
                 attempts=_cell(doc["matches"]["attempted"]),
                 accepted=_cell(doc["matches"]["accepted"]),
+                warnings="; ".join(doc.get("warnings", ())),
             )
             for prefix, m in zip(("baseline", "proposed"), runs, strict=False):
                 row[f"{prefix}_max_pos_dev_m"] = _cell(m["route"]["max_pos_dev_m"])
@@ -438,6 +440,7 @@ def format_summary(items: Sequence[BatchItem]) -> str:
     lines = ["  ".join(t.ljust(w) for t, w in zip(titles, widths, strict=True)).rstrip()]
     lines += ["  ".join(c.ljust(w) for c, w in zip(r, widths, strict=True)).rstrip() for r in body]
     lines += [f"failed: {r['error']}" for r in rows if r["error"]]
+    lines += [f"warning: {Path(r['log']).name}: {r['warnings']}" for r in rows if r["warnings"]]
     return "\n".join(lines)
 
 
@@ -525,6 +528,15 @@ def write_report(
                 f'<li><a href="{esc(f.name)}">{esc(f.name)}</a> <small>{_size(size)}</small></li>\n'
             )
     timing = ", ".join(f"{k.removesuffix('_s')} {v:.1f} s" for k, v in timings.items())
+    warned = doc.get("warnings", [])
+    warnings = (
+        '<div class="warnings"><b>Warnings about this log</b> (what was repaired or looks '
+        "wrong; the figures below are computed on the repaired data)<ul>"
+        + "".join(f"<li>{esc(w)}</li>" for w in warned)
+        + "</ul></div>"
+        if warned
+        else ""
+    )
     page = f"""<!DOCTYPE html>
 <html lang="en"><head><meta charset="utf-8">
 <title>routefuse: {esc(Path(doc["log"]).name)}</title>
@@ -537,11 +549,13 @@ th:first-child, td:first-child {{ text-align: left; }}
 img {{ max-width: 100%; border: 1px solid #eee; }}
 .legend span {{ margin-right: 1em; white-space: nowrap; }}
 .legend i {{ display: inline-block; width: 1.6em; height: 0.6em; margin-right: 0.3em; }}
+.warnings {{ background: #fff4e5; border-left: 4px solid #e8890c; padding: 0.4em 1em; }}
 </style></head><body>
 <h1>{esc(Path(doc["log"]).name)}</h1>
 <p>log <code>{esc(doc["log"])}</code><br>route <code>{esc(doc["route"])}</code><br>
 {doc["duration_s"]:.1f} s, {doc["distance_m"] / 1000:.2f} km; GNSS-degraded intervals
 (s after start): {outages}</p>
+{warnings}
 <p><a href="replay.html"><b>Open the 3D replay</b></a> (play, pause, scrub;
 <code>replay.viser</code> for viser's own player)</p>
 <p class="legend">{_replay_legend()}</p>

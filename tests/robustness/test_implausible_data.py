@@ -89,3 +89,27 @@ def test_fixes_claiming_a_kilometre_of_variance_are_no_fixes(tmp_path: Path) -> 
     log = _load(tmp_path, gnss=dataclasses.replace(gnss, cov_enu=cov))
     assert not log.gnss.valid[100:150].any() and log.gnss.valid[150:200].any()
     assert any("50 fixes claim a variance above" in w for w in log.warnings)
+
+
+def test_the_warning_reaches_run_info_and_the_export(
+    tmp_path: Path, capsys: pytest.CaptureFixture[str]
+) -> None:
+    """Said wherever the user looks: on stderr by run, in info, on the export's report page and
+    in the batch summary (the inspector's status line: tests/inspector/app)."""
+    from _badinputs import run_cli, write_route
+
+    wheel = base_sim().wheel
+    log = write_log(
+        tmp_path / "drive.mcap", wheel=dataclasses.replace(wheel, speed=3.6 * wheel.speed)
+    )
+    route = write_route(tmp_path / "drive.route.geojson")
+    code, _, err = run_cli(capsys, ["run", str(log), "--route", str(route)])
+    assert code == 0 and "routefuse run: warning: wheel speed is 3.6" in err and "km/h" in err
+    code, out, _ = run_cli(capsys, ["info", str(log)])
+    assert code == 0 and "looks like km/h" in out
+    code, _, _ = run_cli(capsys, ["export", "--batch", str(tmp_path), "--out", str(tmp_path / "x")])
+    assert code == 0
+    report = (tmp_path / "x" / "drive" / "report.html").read_text(encoding="utf-8")
+    assert "Warnings about this log" in report and "looks like km/h" in report
+    summary = (tmp_path / "x" / "summary.csv").read_text(encoding="utf-8")
+    assert "looks like km/h" in summary

@@ -4,7 +4,9 @@ from __future__ import annotations
 
 import asyncio
 import threading
+from types import SimpleNamespace
 
+import numpy as np
 from fake_runs import FakeInputs
 from viser import _messages
 
@@ -58,3 +60,29 @@ def test_two_quick_clicks_step_by_each_button_pressed(tmp_path, monkeypatch):
                 app.close()
     finally:
         controller.close()
+
+
+def test_the_status_line_lists_the_logs_warnings_escaped_and_bounded():
+    from inspector.app.playback import MAX_WARNINGS_SHOWN, status_markdown, warnings_markdown
+
+    assert warnings_markdown(()) == ""
+    hostile = "IMU <img src=x onerror=alert(1)>: clock jumps back " + "x" * 1000
+    warned = (*(f"GNSS: warning {k}" for k in range(MAX_WARNINGS_SHOWN + 2)), hostile)
+    text = warnings_markdown(warned)
+    assert f"{len(warned)} warnings about this log" in text
+    assert "GNSS: warning 0" in text and "and 3 more" in text
+    one = warnings_markdown((hostile,))
+    assert "<img" not in one and len(one) < 500
+    timeline = SimpleNamespace(
+        duration=60.0, n_frames=600, match_t=np.zeros(3), match_accepted=np.ones(3, bool)
+    )
+    session = SimpleNamespace(
+        log_name="drive.mcap",
+        route_name="drive.route.geojson",
+        timeline=timeline,
+        outages=(),
+        off_route=None,
+        proposed=SimpleNamespace(warnings=("wheel speed looks like km/h",)),
+    )
+    line = status_markdown(session)  # type: ignore[arg-type]
+    assert "1 warning about this log" in line and "km/h" in line

@@ -61,7 +61,7 @@ def test_log_without_any_fix(tmp_path: Path, capsys) -> None:
     nan = np.full(100, np.nan)
     write_bag(
         path,
-        imu=ImuData(t, np.zeros((100, 3)), np.zeros((100, 3))),
+        imu=ImuData(t, np.zeros((100, 3)), np.tile([0.0, 0.0, 9.81], (100, 1))),
         gnss=GnssData(t, nan, nan, nan, np.full(100, -1, np.int8), np.ones((100, 3))),
         wheel=WheelData(t, np.full(100, 2.0)),
     )
@@ -70,7 +70,7 @@ def test_log_without_any_fix(tmp_path: Path, capsys) -> None:
     assert "GNSS      0 valid of 100 fixes" in out
     assert "outages   1 without a valid fix for more than 1.0 s: 0.0-9.9 s (9.9 s)" in out
     assert "distance  19.8 m from wheel-speed integral" in out
-    assert "note      GNSS /gnss/fix: no valid fix in the whole log" in out
+    assert "warning   GNSS /gnss/fix: no valid fix in the whole log" in out
 
 
 def test_topic_options_and_unused_topics(tmp_path: Path, capsys) -> None:
