@@ -38,7 +38,10 @@ METHODS: tuple[Method, ...] = ("baseline", "proposed", "paper")
 def add_arguments(parser: argparse.ArgumentParser) -> None:
     parser.add_argument("log", metavar="LOG", help=LOG_FORMATS_TEXT)
     parser.add_argument(
-        "--route", metavar="ROUTE", required=True, help=f"route file ({ROUTE_FORMATS_TEXT})"
+        "--route",
+        metavar="ROUTE",
+        default=None,
+        help=f"route file ({ROUTE_FORMATS_TEXT}; default: LOG's <name>.route.* beside it)",
     )
     parser.add_argument(
         "--route-feature",
@@ -142,6 +145,18 @@ _CSV_HEADER = [
 ]  # fmt: skip
 
 
+def _route_beside(log: Path) -> Path:
+    """The route named after the log beside it, as ``serve`` finds it, or a one-line error."""
+    from estimator.io import route_beside
+
+    found = route_beside(log)
+    if found is None:
+        raise RoutefuseError(
+            log, "no route given and none beside the log (<name>.route.*): give one with --route"
+        )
+    return found
+
+
 def execute(args: argparse.Namespace) -> int:
     # imported here, not above: building the parser (``routefuse --help``) stays light
     from estimator.evaluation import format_table, match_summary, method_metrics
@@ -152,9 +167,10 @@ def execute(args: argparse.Namespace) -> int:
     outages = [parse_outage(o) for o in args.outage]
     methods: list[Method] = list(dict.fromkeys(args.method or ("baseline", "proposed")))
     progress = _Progress(enabled=not args.quiet)
+    route_path = Path(args.route) if args.route is not None else _route_beside(Path(args.log))
     inputs = open_inputs(
         Path(args.log),
-        Path(args.route),
+        route_path,
         topics=TopicChoice.from_args(args),
         route_feature=args.route_feature,
         progress=lambda f: progress("loading", f),
@@ -174,7 +190,7 @@ def execute(args: argparse.Namespace) -> int:
     print(format_table([(Path(args.log).name, method, m) for method, m in metrics.items()]))
     _print_notes(named, {m: match_summary(r) for m, r in named.items() if m != "baseline"})
     if args.json is not None:
-        doc = results_document(args.log, args.route, log, named, metrics, outages=outages)
+        doc = results_document(args.log, str(route_path), log, named, metrics, outages=outages)
         try:
             args.json.write_text(json.dumps(doc, indent=2) + "\n", encoding="utf-8")
         except OSError as exc:

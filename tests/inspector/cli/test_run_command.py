@@ -152,3 +152,23 @@ def test_comma_bag_with_an_outage(tmp_path, capsys):
     base, prop = doc["methods"]["baseline"], doc["methods"]["proposed"]
     assert prop["route"]["rmse_pos_dev_m"] < base["route"]["rmse_pos_dev_m"]
     assert prop["truth"]["rmse_cross_m"] < base["truth"]["rmse_cross_m"]
+
+
+def test_without_route_the_one_beside_the_log_is_used(bag, tmp_path, capsys):
+    """As ``serve`` does: ``<name>.route.*`` beside the log; none is one line, exit 2."""
+    import shutil
+
+    log, route = bag
+    assert route.name.split(".")[0] == log.name.split(".")[0]
+    out = tmp_path / "r.json"
+    assert main(["run", str(log), "--json", str(out), "--quiet"]) == 0
+    assert json.loads(out.read_text())["route"] == str(route)
+    lone = tmp_path / "lone.mcap"
+    shutil.copy(log, lone)
+    capsys.readouterr()
+    assert main(["run", str(lone)]) == 2
+    err = capsys.readouterr().err.strip().splitlines()
+    assert err == [
+        f"routefuse: error: {lone}: no route given and none beside the log (<name>.route.*): "
+        "give one with --route"
+    ]
