@@ -39,8 +39,9 @@ def align(
     gnss_var: F64,
     p: Params,
     cfg: F64,
-) -> tuple[F64, F64, int, float]:
-    """(x0, P0, IMU index k0, time of the aligning fix). ``src`` names the log in errors."""
+) -> tuple[F64, F64, int, float, tuple[str, ...]]:
+    """(x0, P0, IMU index k0, time of the aligning fix, warnings about the fixes left out of the
+    alignment). ``src`` names the log in errors."""
     s = p.sensors
     use = np.flatnonzero(gnss_t >= imu_t[0])
     if len(use) == 0:
@@ -52,6 +53,7 @@ def align(
         return float(np.interp(t1, imu_t, cum_yaw) - np.interp(t0, imu_t, cum_yaw))
 
     speed: float | None
+    notes: tuple[str, ...] = ()
     if s.initial_heading_deg is not None:
         j = int(use[0])
         yaw = math.radians(s.initial_heading_deg)
@@ -66,6 +68,7 @@ def align(
                 "fairly straight line; set sensors.initial_heading_deg",
             )
         j, yaw, sig_yaw, speed = found
+        notes = _left_out(use, j, gnss_t, gnss_pos, yaw, speed)
     t_fix = float(gnss_t[j])
     k0 = int(np.searchsorted(imu_t, t_fix, side="right") - 1)
     k0 = max(k0, 0)
@@ -95,7 +98,27 @@ def align(
     diag[9:12] = (n.gyro_bias_init_sigma_deg_h * DEG_H) ** 2
     diag[12:15] = (n.accel_bias_init_sigma_mg * MG) ** 2
     diag[15] = n.wheel_scale_sigma**2 if cfg[C_SCALE_ON] > 0 else 0.0
-    return x0, np.diag(diag), k0, t_fix
+    return x0, np.diag(diag), k0, t_fix, notes
+
+
+def _left_out(
+    use: NDArray[np.intp], j: int, gnss_t: F64, gnss_pos: F64, yaw: float, speed: float
+) -> tuple[str, ...]:
+    """The fixes before the aligning one whose chord the alignment refused, each with how far
+    it lies from the track the aligning chord runs back along (heading and speed at it)."""
+    first = int(use[0])
+    chord_start = int(np.searchsorted(gnss_t, gnss_t[j] - 60.0))
+    direction = np.array([math.cos(yaw), math.sin(yaw)])
+    out = []
+    for i in range(first, j):
+        back = gnss_pos[j, :2] - direction * speed * (gnss_t[j] - gnss_t[i])
+        off = float(np.hypot(*(gnss_pos[i, :2] - back)))
+        if i >= chord_start and off > 5.0:
+            out.append(
+                f"GNSS fix at {gnss_t[i] - gnss_t[first]:.1f} s after the first left out of "
+                f"the initial alignment: {off:.0f} m off the track of the fixes after it"
+            )
+    return tuple(out[:5])
 
 
 def _chord_heading(
@@ -118,24 +141,57 @@ def _chord_heading(
         far = np.flatnonzero(d >= d_min)
         if len(far) == 0:
             continue
-        jj = int(i + 1 + far[0])
+        jj = max(int(i + 1 + far[0]), int(i) + 2)  # a fix between the ends to check them
+        if jj >= hi:
+            continue
         turn = yaw_between(gnss_t[i], gnss_t[jj])
         if abs(turn) > math.radians(30):
             continue
         chord = gnss_pos[jj, :2] - gnss_pos[i, :2]
+        sig_h = math.sqrt(gnss_var[i, 0] + gnss_var[jj, 0])
+        if not _chord_consistent(gnss_pos[i : jj + 1, :2], sig_h, turn):
+            continue
+        travelled = _travelled(wheel_t, wheel_v, float(gnss_t[i]), float(gnss_t[jj]))
+        length = float(np.hypot(*chord))
+        if travelled is not None and abs(length - travelled) > 3 * sig_h + 0.1 * travelled + 1:
+            continue
         t_mid = 0.5 * (gnss_t[i] + gnss_t[jj])
         yaw = math.atan2(chord[1], chord[0]) + yaw_between(t_mid, gnss_t[jj])
         if len(wheel_t) > 1:
             w_sel = (wheel_t >= gnss_t[i]) & (wheel_t <= gnss_t[jj])
             if w_sel.any() and np.mean(wheel_v[w_sel]) < 0:
                 yaw += math.pi
-        sig_h = math.sqrt(gnss_var[i, 0] + gnss_var[jj, 0])
         sig_yaw = math.sqrt(
             (sig_h / float(np.hypot(*chord))) ** 2 + (0.2 * turn) ** 2 + math.radians(1.0) ** 2
         )
         speed = float(np.hypot(*chord)) / (gnss_t[jj] - gnss_t[i])
         return jj, yaw, sig_yaw, speed
     return None
+
+
+def _travelled(wheel_t: F64, wheel_v: F64, t0: float, t1: float) -> float | None:
+    """Distance the wheels measured between two times (None where they do not cover both)."""
+    if len(wheel_t) < 2 or wheel_t[0] > t0 or wheel_t[-1] < t1:
+        return None
+    grid = np.linspace(t0, t1, 50)
+    return float(np.trapezoid(np.abs(np.interp(grid, wheel_t, wheel_v)), grid))
+
+
+def _chord_consistent(track: F64, sigma: float, turn: float) -> bool:
+    """Whether the fixes between a chord's ends lie along it: a bad fix at either end (a first
+    fix 50 m off) turns the chord away from the road, and the fixes between then stand off
+    it. Allowed off the chord: three sigmas of the ends' noise plus the sagitta of an arc
+    turning ``turn`` over the chord (L |turn| / 8) and 2 m."""
+    if len(track) < 3:
+        return True
+    chord = track[-1] - track[0]
+    length = float(np.hypot(*chord))
+    if length == 0.0:
+        return False
+    normal = np.array([-chord[1], chord[0]]) / length
+    off = np.abs((track[1:-1] - track[0]) @ normal)
+    allowed = 3.0 * sigma + length * abs(turn) / 8.0 + 2.0
+    return bool(np.median(off) <= allowed)
 
 
 def _speed_at(

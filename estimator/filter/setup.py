@@ -111,9 +111,10 @@ def prepare_inputs(log: Log, p: Params, frame: LocalFrame, outages: Outages) -> 
     cfg[C_WHITE_VAR] = float(np.median(gnss_var[:, :2]))
     cfg[C_QW_H] = 2 * wander[0] / n.gnss_wander_tau_s
     cfg[C_QW_V] = 2 * wander[2] / n.gnss_wander_tau_s
-    x0, P0, k0, t_fix = align(
+    x0, P0, k0, t_fix, notes = align(
         src, imu_t, gyro, accel, still, wheel_t, wheel_v, gnss_t, gnss_pos, gnss_var, p, cfg
     )
+    warnings.extend(notes)
     # the aligning fix measures position + wander: their errors start anti-correlated
     for i in range(3):
         a, b = E_POS + i, E_GW + i
