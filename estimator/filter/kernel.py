@@ -68,8 +68,9 @@ I64 = NDArray[np.int64]
 
 IMU_GAP_S = 5.0
 """An IMU interval longer than this (a logging gap) is not integrated: rates held for minutes
-turn the attitude into noise. The state is carried across unchanged and the next fix widens
-the position covariance to cover wherever the vehicle went meanwhile."""
+turn the attitude into noise. Where the wheel speed covers the gap, the position is carried
+along the last heading by the distance the wheels measured (:func:`_bridge`); the next fix
+widens the position covariance to cover wherever the vehicle went meanwhile."""
 GAP_VEL_VAR = 5.0**2
 GAP_YAW_VAR = (math.pi / 4) ** 2
 """Velocity and yaw variance added across a logging gap: the vehicle may have turned."""
@@ -166,6 +167,8 @@ def run_until(
         if idx[I_OUT] >= out.shape[0] - 2:
             return STATUS_FULL
         dt = _interval(P, aux, t)
+        if dt == 0.0 and aux[A_INFLATE] > 0 and t - aux[A_TIME] > IMU_GAP_S:
+            _bridge(x, P, aux, t, wheel_t, wheel_v)
         # --- strapdown, and the pending covariance propagation
         fn0, fn1, fn2 = mechanise(x, aux, gyro, accel, k, dt, w, grav, itw, C)
         accumulate(aux, C, fn0, fn1, fn2, dt)
@@ -217,6 +220,44 @@ def _interval(P: F64, aux: F64, t: float) -> float:
             P[E_VEL + i, E_VEL + i] += GAP_VEL_VAR
         P[E_ATT + 2, E_ATT + 2] += GAP_YAW_VAR
     return dt
+
+
+@kernel
+def _bridge(x: F64, P: F64, aux: F64, t: float, wheel_t: F64, wheel_v: F64) -> None:
+    """Across an IMU gap the wheels still measured how far the vehicle went: move the position
+    that distance along the last horizontal velocity's direction (and the DR track with it),
+    set the speed to the wheels' at the gap's end, and add to the position variance what a
+    road turning anywhere in the gap could put it off, half the distance each way. Without
+    wheel samples over the whole gap (none more than 1 s apart) the position is held."""
+    t0 = aux[A_TIME]
+    a = np.searchsorted(wheel_t, t0)
+    b = np.searchsorted(wheel_t, t)
+    if a == 0 or b >= wheel_t.shape[0] or b <= a:
+        return
+    dist = 0.0
+    for j in range(a - 1, b):
+        if wheel_t[j + 1] - wheel_t[j] > 1.0:
+            return
+        lo = max(wheel_t[j], t0)
+        hi = min(wheel_t[j + 1], t)
+        if hi > lo:
+            dist += 0.5 * abs(wheel_v[j] + wheel_v[j + 1]) * (hi - lo)
+    speed = math.hypot(x[X_VEL], x[X_VEL + 1])
+    if speed < 0.1:
+        return
+    ue, un = x[X_VEL] / speed, x[X_VEL + 1] / speed
+    x[X_POS] += ue * dist
+    x[X_POS + 1] += un * dist
+    aux[A_DR] += ue * dist
+    aux[A_DR + 1] += un * dist
+    aux[A_DIST] += dist
+    f = (t - wheel_t[b - 1]) / max(wheel_t[b] - wheel_t[b - 1], 1e-9)
+    v_end = abs(wheel_v[b - 1] + f * (wheel_v[b] - wheel_v[b - 1]))
+    x[X_VEL] = ue * v_end
+    x[X_VEL + 1] = un * v_end
+    var = (0.5 * dist) ** 2
+    P[E_POS, E_POS] += var
+    P[E_POS + 1, E_POS + 1] += var
 
 
 @kernel

@@ -13,6 +13,7 @@ from numpy.typing import NDArray
 
 from estimator.errors import LogError
 from estimator.filter.alignment import DEG_H, MG, align
+from estimator.filter.kernel import IMU_GAP_S
 from estimator.filter.layout import (
     A_DR,
     A_LAST_AID,
@@ -99,6 +100,9 @@ def prepare_inputs(log: Log, p: Params, frame: LocalFrame, outages: Outages) -> 
     imu_t, gyro, accel = _imu_arrays(log, s, warnings)
     wheel_t, wheel_v = _wheel_arrays(log, s, warnings)
     gnss_t, gnss_pos, gnss_var = _gnss_arrays(log, p, frame, outages)
+    gnss_t, gnss_pos, gnss_var = _outside_imu_gaps(
+        imu_t, gnss_t, gnss_pos, gnss_var, log.t_start, log.wheel is not None, warnings
+    )
     n = p.noise
     h_floor = n.gnss_sigma_floor_m**2
     still = stationary(imu_t, gyro, accel, wheel_t, wheel_v, p)
@@ -145,6 +149,37 @@ def prepare_inputs(log: Log, p: Params, frame: LocalFrame, outages: Outages) -> 
         degraded=degraded,
         warnings=tuple(warnings),
     )
+
+
+def _outside_imu_gaps(
+    imu_t: F64,
+    gnss_t: F64,
+    gnss_pos: F64,
+    gnss_var: F64,
+    t_start: float,
+    have_wheel: bool,
+    warnings: list[str],
+) -> tuple[F64, F64, F64]:
+    """The fixes outside the IMU's logging gaps (longer than :data:`IMU_GAP_S`). Inside one
+    there is no state to test a fix against: taken at the gap's end, minutes-old fixes moved
+    by the old velocity would each pull the state somewhere else. The filter carries the state
+    across the gap (along the wheels' distance where they cover it) and re-places it at the
+    first fix after it. Each gap is named."""
+    gaps = np.flatnonzero(np.diff(imu_t) > IMU_GAP_S)
+    if not len(gaps):
+        return gnss_t, gnss_pos, gnss_var
+    keep = np.ones(len(gnss_t), bool)
+    for g in gaps:
+        a, b = float(imu_t[g]), float(imu_t[g + 1])
+        inside = (gnss_t > a) & (gnss_t < b)
+        keep &= ~inside
+        bridge = "carried along the wheel speed" if have_wheel else "held (no wheel speed)"
+        warnings.append(
+            f"IMU gap {a - t_start:.1f}-{b - t_start:.1f} s: no estimate inside it, the position "
+            f"{bridge}; {int(inside.sum())} fixes inside it not used, the filter re-placed at "
+            "the first fix after it"
+        )
+    return gnss_t[keep], gnss_pos[keep], gnss_var[keep]
 
 
 def _imu_arrays(log: Log, s: SensorParams, warnings: list[str]) -> tuple[F64, F64, F64]:
