@@ -5,7 +5,10 @@ zstd chunk of zeros cost 4.3 GB of memory and two minutes. The chunk records say
 content is (an mcap chunk's ``uncompressed_size``, a ROS 1 chunk's ``size``; a zstd frame's own
 content size too, which is what zstd actually produces), so walking the records, without
 decompressing anything, bounds the cost: a log whose chunks add up to more than
-:data:`MAX_EXPANSION` times its size and more than :data:`MAX_UNCOMPRESSED_BYTES` is refused."""
+:data:`MAX_EXPANSION` times its size and more than :data:`MAX_UNCOMPRESSED_BYTES` is refused.
+A ROS 1 chunk's bz2 or lz4 stream carries no size of its own, so it is decompressed once here,
+in pieces and never past what the chunk declares: a chunk that holds more than it declares is
+refused before rosbags, which trusts the declaration, decompresses it whole."""
 
 from __future__ import annotations
 
@@ -53,6 +56,12 @@ def _check(path: Path, chunk_sizes: Callable[[BinaryIO, int], Iterator[int]]) ->
                     )
     except OSError as exc:
         raise LogError(path, f"cannot read the file ({exc.strerror or exc})") from None
+    except ChunkLies as exc:
+        raise LogError(
+            path,
+            f"refused: a compressed chunk {exc} (it would decompress past its size); "
+            "a corrupt or hostile log",
+        ) from None
     except (struct.error, ValueError):
         return  # malformed records: rosbags reports them (it stops before a chunk it cannot frame)
 
@@ -99,9 +108,32 @@ def _ros1_chunk_sizes(fh: BinaryIO, size: int) -> Iterator[int]:
         fields = _ros1_fields(fh.read(header_len))
         (data_len,) = struct.unpack("<I", fh.read(4))
         if fields.get("op") == b"\x05" and len(fields.get("size", b"")) == 4:
-            yield struct.unpack("<I", fields["size"])[0]
+            declared = struct.unpack("<I", fields["size"])[0]
+            compression = fields.get("compression", b"none")
+            if compression in (b"bz2", b"lz4") and data_len <= size:
+                _within_declared(fh.read(data_len), compression, declared)
+            yield declared
         pos += 8 + header_len + data_len
         fh.seek(pos)
+
+
+def _within_declared(data: bytes, compression: bytes, declared: int) -> None:
+    """Decompress a ROS 1 chunk in bounded pieces; a ``ValueError`` (read as a lying chunk by
+    :func:`_check`) if it holds more than ``declared`` bytes."""
+    if compression == b"bz2":
+        import bz2
+
+        out = bz2.BZ2Decompressor().decompress(data, max_length=declared + 1)
+    else:
+        import lz4.frame
+
+        out = lz4.frame.LZ4FrameDecompressor().decompress(data, max_length=declared + 1)
+    if len(out) > declared:
+        raise ChunkLies(f"holds more than its declared {declared} bytes")
+
+
+class ChunkLies(ValueError):
+    """A chunk that decompresses to more than it declares."""
 
 
 def _ros1_fields(header: bytes) -> dict[str, bytes]:

@@ -88,3 +88,37 @@ def test_ros1_chunk_declaring_gigabytes_is_refused(tmp_path: Path) -> None:
     with pytest.raises(LogError, match="decompress") as err:
         describe_topics(path)
     assert str(path) in str(err.value)
+
+
+@pytest.mark.parametrize("compression", ["bz2", "lz4"])
+def test_ros1_chunk_holding_more_than_it_declares_is_refused(
+    tmp_path: Path, compression: str
+) -> None:
+    """bz2 and lz4 streams carry no trusted size: a chunk declaring 1 kB and holding 20 MB of
+    zeros is found out, decompressing at most what it declares, before rosbags trusts it."""
+    import bz2
+
+    import lz4.frame
+
+    zeros = b"\0" * 20_000_000
+    payload = bz2.compress(zeros) if compression == "bz2" else lz4.frame.compress(zeros)
+    head = _ros1_record(
+        {
+            "op": b"\x03",
+            "index_pos": struct.pack("<Q", 0),
+            "conn_count": struct.pack("<I", 0),
+            "chunk_count": struct.pack("<I", 1),
+        },
+        b" " * 4000,
+    )
+    chunk = _ros1_record(
+        {"op": b"\x05", "compression": compression.encode(), "size": struct.pack("<I", 1000)},
+        payload,
+    )
+    path = tmp_path / "liar.bag"
+    path.write_bytes(b"#ROSBAG V2.0\n" + head + chunk)
+    start = time.perf_counter()
+    with pytest.raises(LogError, match="holds more than its declared 1000 bytes") as err:
+        describe_topics(path)
+    assert time.perf_counter() - start < 2.0
+    assert str(path) in str(err.value) and "\n" not in str(err.value)
