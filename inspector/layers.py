@@ -12,6 +12,7 @@ polylines as line segments with screen-space thickness.
 
 from __future__ import annotations
 
+import html
 from typing import ClassVar, Literal, TypeVar
 
 import numpy as np
@@ -64,6 +65,9 @@ class Layer:
 
     key: ClassVar[str] = ""
     label: ClassVar[str] = ""
+    legend: ClassVar[tuple[tuple[RGB, str], ...]] = ()
+    """(colour, what it marks) of everything the layer draws: the Layers tab, the compact
+    legend and the export's legend are made from it"""
 
     def __init__(self, scene: viser.SceneApi, *, root: str = "/routefuse") -> None:
         self.scene = scene
@@ -204,6 +208,7 @@ class Layer:
 class RouteLayer(Layer):
     key = "route"
     label = "route"
+    legend = ((ROUTE, "mission route"),)
 
     def set_data(self, data: SceneData) -> None:
         self._lines("line", polyline_segments(data.route_line, 0.0), ROUTE, 3.0)
@@ -212,6 +217,7 @@ class RouteLayer(Layer):
 class GnssLayer(Layer):
     key = "gnss"
     label = "GNSS fixes and outages"
+    legend = ((GNSS, "GNSS fix"), (NO_GNSS, "GNSS outage (no fix)"))
 
     def set_data(self, data: SceneData) -> None:
         self._lines("missing", data.degraded_segments, NO_GNSS, 14.0)
@@ -295,6 +301,7 @@ class BaselineLayer(TrackLayer):
     key = "baseline"
     label = "baseline trajectory"
     color = BASELINE
+    legend = ((BASELINE, "baseline: GNSS/INS/odometer, dead reckoning in outages"),)
     z = 0.1
 
     def _track(self, data: SceneData) -> Track | None:
@@ -305,6 +312,7 @@ class ProposedLayer(TrackLayer):
     key = "proposed"
     label = "proposed trajectory"
     color = PROPOSED
+    legend = ((PROPOSED, "proposed: with the route matches"),)
     z = 0.2
 
     def _track(self, data: SceneData) -> Track | None:
@@ -315,6 +323,7 @@ class TruthLayer(TrackLayer):
     key = "truth"
     label = "ground truth"
     color = TRUTH
+    legend = ((TRUTH, "ground truth (when the log has it)"),)
     z = 0.15
     length_m = 5.0
 
@@ -327,6 +336,7 @@ class VerdictLayer(Layer):
 
     key = "verdicts"
     label = "match verdicts"
+    legend = ((ACCEPTED, "match accepted"), (REJECTED, "match refused"))
 
     def set_data(self, data: SceneData) -> None:
         ok = np.all(np.isfinite(data.match_xy), axis=1) if len(data.match_xy) else np.zeros(0, bool)
@@ -341,6 +351,13 @@ class MatchLayer(Layer):
 
     key = "match"
     label = "current match attempt"
+    legend = (
+        (SEGMENT, "route segment matched"),
+        (DR_WINDOW, "DR window (dead-reckoned track)"),
+        (ALIGNED, "DR window aligned onto the route"),
+        (PAIRS, "point pairs"),
+        (PSEUDO, "DR position -> pseudo-position"),
+    )
     _parts = (
         "segment",
         "window",
@@ -450,6 +467,21 @@ LAYER_TYPES: tuple[type[Layer], ...] = (
     VerdictLayer,
     MatchLayer,
 )
+
+
+def legend_entries() -> tuple[tuple[RGB, str], ...]:
+    """Every colour on the map and what it marks, in the layers' order."""
+    return tuple(entry for cls in LAYER_TYPES for entry in cls.legend)
+
+
+def legend_html(entries: tuple[tuple[RGB, str], ...], *, separator: str = " ") -> str:
+    """Colour swatches with their meaning as inline HTML (viser's markdown renders it; the
+    export's pages embed it), every label escaped."""
+    return separator.join(
+        f'<span style="white-space:nowrap"><span style="color:rgb{rgb}">&#9632;</span> '
+        f"{html.escape(text)}</span>"
+        for rgb, text in entries
+    )
 
 
 class SceneLayers:

@@ -9,6 +9,7 @@ the session's precomputed arrays.
 
 from __future__ import annotations
 
+import math
 import threading
 from collections.abc import Callable
 from typing import TYPE_CHECKING, Any
@@ -24,7 +25,7 @@ from inspector.app.playback import PlaybackPanel
 from inspector.app.plots import PlotsPanel
 from inspector.app.widgets import Event
 from inspector.controller import Playhead, Session
-from inspector.layers import LAYER_TYPES, SceneLayers
+from inspector.layers import LAYER_TYPES, SceneLayers, legend_entries, legend_html
 from inspector.scene_data import SceneData
 
 if TYPE_CHECKING:
@@ -39,6 +40,8 @@ NO_MORE = {
     "previous rejected": "no earlier rejected attempt",
 }
 """what a jump says when there is no attempt to go to"""
+FOCUS_HEIGHT_M = 600.0
+"""camera height over the attempt a tab opens at: the window and its route segment in view"""
 MAX_NOTE = 300
 """characters of a notification (a refused value may be any size)"""
 
@@ -56,6 +59,8 @@ class ClientView:
         self._camera_placed = False
         self.layers = SceneLayers(client.scene)
         self._camera_pending = False
+        self._focus: tuple[np.ndarray, float] | None = None
+        """where the camera first looks (the first refused attempt), else the whole drive"""
         client.camera.on_update(self._on_camera)
         self._build()
 
@@ -63,6 +68,10 @@ class ClientView:
         gui = self.client.gui
         gui.configure_theme(control_width="large", show_share_button=False)
         self.playback = PlaybackPanel(self, gui)
+        with gui.add_folder("Legend", expand_by_default=True):
+            self.legend = gui.add_markdown(
+                f"<small>{legend_html(legend_entries(), separator=' &nbsp; ')}</small>"
+            )
         tabs = gui.add_tab_group()
         with tabs.add_tab("Match"):
             self.match = MatchPanel(gui)
@@ -73,6 +82,7 @@ class ClientView:
                 box = gui.add_checkbox(cls.label, True)
                 box.on_update(self._layer_toggler(cls.key))
                 self.layer_boxes[cls.key] = box
+                gui.add_markdown(f"<small>{legend_html(cls.legend, separator='<br>')}</small>")
         with tabs.add_tab("Parameters"):
             self.parameters = ParametersPanel(self, gui, lock=self._lock)
         with tabs.add_tab("Files"):
@@ -182,6 +192,8 @@ class ClientView:
         if self.follow:
             xy, _ = data.proposed.pose_at(self.playhead.t + data.t0)
             center, height = np.asarray(xy, float), 250.0
+        elif self._focus is not None:
+            center, height = self._focus
         else:
             center = data.center
             height = data.extent_m * 0.6
@@ -192,7 +204,7 @@ class ClientView:
         # The control panel covers the right of the view: fit the drive into the rest and
         # shift the view east so it is centred there (top-down, north up: screen x = east).
         aspect, free, half_h = self._view_geometry()
-        if not self.follow:
+        if not self.follow and self._focus is None:
             height = max(height, data.extent_m * 0.55 / (half_h * aspect * free))
         center = np.asarray(center, float) + self._panel_shift(height)[:2]
         cam.far = max(10 * height, 1000.0)
@@ -239,11 +251,27 @@ class ClientView:
                 self.parameters.sync()
                 self.files.show_session(session)
             self.playhead.t = session.timeline.clamp(self.playhead.t)
+            if first:
+                self._open_at_the_story(session)
             self.match.forget()
             if first or not self._camera_placed:
                 self.place_camera()
                 self._camera_placed = True
             self.render()
+
+    def _open_at_the_story(self, session: Session) -> None:
+        """A tab's first session opens at its first refused attempt (else its first attempt),
+        zoomed to it with the Match tab filled: where a user debugging matches starts."""
+        tl = session.timeline
+        i = tl.next_match(-math.inf, rejected_only=True)
+        if i is None:
+            i = tl.next_match(-math.inf)
+        if i is None:
+            return
+        self.playhead.t = float(tl.match_t[i])
+        xy = np.asarray(session.scene.match_xy[i], float)
+        if np.all(np.isfinite(xy)):
+            self._focus = (xy, FOCUS_HEIGHT_M)
 
     def sync_params(self) -> None:
         """Show the controller's parameters (after another tab changed them, or a failure)."""

@@ -479,25 +479,9 @@ def _html_table(methods: dict[str, dict[str, Any]], group: str, caption: str) ->
 
 def _replay_legend() -> str:
     """The replay's colours (it has no legend of its own), from the scene layers."""
-    from inspector import layers as c
+    from inspector.layers import legend_entries, legend_html
 
-    entries = (
-        (c.ROUTE, "route"),
-        (c.BASELINE, "baseline"),
-        (c.PROPOSED, "compared method"),
-        (c.TRUTH, "truth"),
-        (c.NO_GNSS, "GNSS outage"),
-        (c.SEGMENT, "matched route segment"),
-        (c.DR_WINDOW, "DR window"),
-        (c.ALIGNED, "aligned window"),
-        (c.PSEUDO, "pseudo-position"),
-        (c.ACCEPTED, "accepted"),
-        (c.REJECTED, "rejected"),
-    )
-    return " ".join(
-        f'<span><i style="background: rgb{rgb}"></i>{html.escape(label)}</span>'
-        for rgb, label in entries
-    )
+    return legend_html(legend_entries())
 
 
 def _size(n: int) -> str:
@@ -548,7 +532,6 @@ th, td {{ border: 1px solid #ccc; padding: 0.3em 0.6em; text-align: right; }}
 th:first-child, td:first-child {{ text-align: left; }}
 img {{ max-width: 100%; border: 1px solid #eee; }}
 .legend span {{ margin-right: 1em; white-space: nowrap; }}
-.legend i {{ display: inline-block; width: 1.6em; height: 0.6em; margin-right: 0.3em; }}
 .warnings {{ background: #fff4e5; border-left: 4px solid #e8890c; padding: 0.4em 1em; }}
 </style></head><body>
 <h1>{esc(Path(doc["log"]).name)}</h1>

@@ -388,6 +388,7 @@ def test_four_pages_keep_their_time_and_share_a_parameter_change(browser, inspec
     )
     others = list(zip(new_pages, [None] * 3, strict=True))
     pages = [(pg1, view1), *others]
+    starts = [_frame(pg) for pg in new_pages]  # each opens at the first refused attempt
     sessions: list = []
     unsubscribe = controller.subscribe(on_session=sessions.append)
     try:
@@ -401,10 +402,13 @@ def test_four_pages_keep_their_time_and_share_a_parameter_change(browser, inspec
                     pg.get_by_role("button", name="10 »", exact=True).dispatch_event("click")
             time.sleep(0.15)
         for k, (pg, _) in enumerate(others, start=1):
+            goal = starts[k - 1] + 10 * k
             _wait(
-                lambda pg=pg, k=k: _frame(pg) == 1 + 10 * k,
+                lambda pg=pg, goal=goal: _frame(pg) == goal,
                 30,
-                lambda pg=pg, k=k: f"page {k + 1} to reach frame {1 + 10 * k} (at {_frame(pg)})",
+                lambda pg=pg, k=k, goal=goal: (
+                    f"page {k + 1} to reach frame {goal} (at {_frame(pg)})"
+                ),
             )
         frames = [_frame(pg) for pg, _ in pages]
         assert len(set(frames)) == 4, frames

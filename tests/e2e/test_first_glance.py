@@ -1,0 +1,83 @@
+"""What a person sees first (issue 19): a legend on the map's side without opening a tab, one
+next to each layer's toggle, and the page opening at the first refused match attempt, zoomed
+to it, with the Match tab filled. Clicks and reads the page as a person does, in Chromium."""
+
+from __future__ import annotations
+
+import re
+import time
+from pathlib import Path
+
+import pytest
+from _browser import free_port
+
+from estimator.params import Params, with_values
+from inspector.layers import LAYER_TYPES, legend_entries
+
+REPO = Path(__file__).resolve().parents[2]
+LOG = REPO / "sample_logs" / "monaco_tunnel.mcap"
+ROUTE = REPO / "sample_logs" / "monaco_tunnel.route.geojson"
+# a tight residual gate: some of the tunnel's attempts are refused, so there is a story
+TIGHT = with_values(Params(), {"gates.max_residual_m": 0.6})
+
+
+@pytest.fixture(scope="module")
+def served():
+    from inspector.cli.serve import start
+
+    server, controller, app = start(
+        host="127.0.0.1", port=free_port(), data_dirs=[], log=LOG, route=ROUTE, params=TIGHT
+    )
+    try:
+        assert controller.wait_idle(240), "the sample did not load"
+        assert controller.session is not None
+        yield server, controller, app
+    finally:
+        app.close()
+        controller.close()
+        server.stop()
+
+
+def _wait(predicate, timeout: float = 40.0, what: str = "condition"):
+    deadline = time.monotonic() + timeout
+    while time.monotonic() < deadline:
+        value = predicate()
+        if value:
+            return value
+        time.sleep(0.1)
+    raise AssertionError(f"timed out waiting for {what}")
+
+
+def test_the_page_opens_at_the_first_refusal_with_a_legend(browser, served, tmp_path):
+    server, controller, app = served
+    session = controller.session
+    tl = session.timeline
+    first_refused = tl.next_match(-1e9, rejected_only=True)
+    assert first_refused is not None, "the tight gate refused nothing: no story to open at"
+    page = browser.new_page(viewport={"width": 1400, "height": 900})
+    page.set_default_timeout(90_000)
+    try:
+        page.goto(f"http://127.0.0.1:{server.get_port()}")
+        _wait(lambda: "match attempts" in page.inner_text("body"), what="the session")
+        _wait(lambda: "REJECTED" in page.inner_text("body"), 60, "the refused attempt")
+        body = page.inner_text("body")
+        # the compact legend, visible without opening a tab: every colour's meaning
+        for _, meaning in legend_entries():
+            assert meaning in body, meaning
+        # opened at the first refused attempt, the Match tab filled with its gates
+        view = app.views()[-1]
+        assert view.playhead.t == pytest.approx(float(tl.match_t[first_refused]))
+        assert "No match attempt before this time" not in body
+        assert re.search(r"✗ FAILED", body), body[:1500]
+        # zoomed to it, not over the whole drive
+        cam = view.client.camera
+        _wait(lambda: cam.update_timestamp > 0, 20, "the browser's camera")
+        assert float(cam.position[2]) < 0.5 * session.scene.extent_m
+        page.screenshot(path=str(tmp_path / "first_glance.png"))
+        # the Layers tab: each toggle with its colours
+        page.get_by_role("tab", name="Layers").click()
+        for cls in LAYER_TYPES:
+            page.get_by_text(cls.label, exact=True).first.wait_for()
+        page.screenshot(path=str(tmp_path / "layers_tab.png"))
+    finally:
+        page.close()
