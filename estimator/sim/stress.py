@@ -1,0 +1,178 @@
+"""A stress corpus no default was tuned on (issue 17): simulated tunnel drives with the faults
+the world has and the samples do not: a mission route rigidly offset and rotated from the road
+driven, large gyro biases, wheel-scale errors, no odometer, bad first fixes, IMU gaps, and the
+parallel-road and reversed-route traps.
+
+Every drive is a pure function of its index (:func:`drive_spec`, then :func:`build`): the same
+index gives bit for bit the same log and route, so a figure measured on the corpus can be
+reproduced and a drive that fails can be opened on its own. Drives are built in memory (a
+:class:`~estimator.pipeline.inputs.Inputs`); ``routefuse simulate`` writes bags when a file is
+wanted.
+"""
+
+from __future__ import annotations
+
+import dataclasses
+import math
+from dataclasses import dataclass
+from typing import Literal
+
+import numpy as np
+
+from estimator.log import Log
+from estimator.nav.frames import LocalFrame
+from estimator.pipeline.inputs import Inputs
+from estimator.route import Route
+from estimator.sim.scenarios import get_scenario
+from estimator.sim.simulation import simulate
+
+Fault = Literal[
+    "map_bias", "no_odometer", "bad_first_fix", "imu_gap", "parallel_road", "reversed_route"
+]
+BASES = ("long_tunnel", "spiral_tunnel", "multi_tunnel", "monaco_tunnel")
+FAULT_CYCLE: tuple[Fault, ...] = (
+    "map_bias",
+    "map_bias",
+    "no_odometer",
+    "map_bias",
+    "bad_first_fix",
+    "map_bias",
+    "imu_gap",
+    "map_bias",
+    "parallel_road",
+    "reversed_route",
+)
+"""the fault of drive i is FAULT_CYCLE[i % 10] (and every drive has some map bias)"""
+PARALLEL_SHIFT_M = 25.0
+M_PER_DEG_LAT = 111_320.0
+
+
+@dataclass(frozen=True)
+class DriveSpec:
+    """What one corpus drive is: its base scenario, seed and the faults drawn for it."""
+
+    index: int
+    base: str
+    seed: int
+    fault: Fault
+    bias_along_m: float
+    bias_across_m: float
+    bias_rotation_deg: float
+    gyro_bias_deg_h: float
+    """1-sigma of the simulated gyro's turn-on bias (drawn per axis)"""
+    wheel_scale_error: float
+    first_fix_off_m: float
+    imu_gap_s: float
+
+    @property
+    def route_is_right(self) -> bool:
+        """The route is the road driven (up to its map bias), not a trap."""
+        return self.fault not in ("parallel_road", "reversed_route")
+
+
+def drive_spec(index: int) -> DriveSpec:
+    """The faults of corpus drive ``index`` (drawn from its own generator)."""
+    rng = np.random.default_rng([20261123, index])
+    fault = FAULT_CYCLE[index % len(FAULT_CYCLE)]
+    return DriveSpec(
+        index=index,
+        base=BASES[index % len(BASES)],
+        seed=1000 + index,
+        fault=fault,
+        bias_along_m=float(rng.uniform(0.0, 15.0)) * float(rng.choice([-1.0, 1.0])),
+        bias_across_m=float(rng.uniform(0.0, 5.0)) * float(rng.choice([-1.0, 1.0])),
+        bias_rotation_deg=float(rng.uniform(-2.0, 2.0)),
+        gyro_bias_deg_h=float(rng.uniform(0.0, 720.0)),
+        wheel_scale_error=float(rng.uniform(-0.02, 0.02)),
+        first_fix_off_m=float(rng.uniform(20.0, 60.0)) if fault == "bad_first_fix" else 0.0,
+        imu_gap_s=float(rng.uniform(20.0, 60.0)) if fault == "imu_gap" else 0.0,
+    )
+
+
+@dataclass(frozen=True)
+class Drive:
+    spec: DriveSpec
+    inputs: Inputs
+    """the log and the (faulty) route, in the drive's frame"""
+    road: Route
+    """the route as the road really is (for the route-relative figures, reported apart)"""
+    tunnels: tuple[tuple[float, float], ...]
+    """GNSS outages of the drive, log time"""
+
+
+def build(spec: DriveSpec) -> Drive:
+    """The drive of ``spec``: simulated, then its faults applied to the log and the route."""
+    sc = get_scenario(spec.base)
+    sc = dataclasses.replace(
+        sc,
+        imu=dataclasses.replace(sc.imu, gyro_turn_on_bias_deg_h=spec.gyro_bias_deg_h),
+        wheel=dataclasses.replace(sc.wheel, scale_error=spec.wheel_scale_error),
+    )
+    sim = simulate(sc, seed=spec.seed)
+    road = sim.route()
+    log = sim.log()
+    if spec.fault == "no_odometer":
+        log = dataclasses.replace(log, wheel=None)
+    elif spec.fault == "bad_first_fix":
+        log = _first_fix_moved(log, spec.first_fix_off_m)
+    elif spec.fault == "imu_gap":
+        log = _imu_gap(log, sim.tunnels, spec.imu_gap_s)
+    pivot = _position_at(log, sim.frame, 0.5 * sum(sim.tunnels[0]))
+    route = map_biased(
+        road, spec.bias_along_m, spec.bias_across_m, spec.bias_rotation_deg, pivot=pivot
+    )
+    if spec.fault == "parallel_road":
+        route = Route(route.xy + PARALLEL_SHIFT_M * _left_of(route), name=route.name)
+    elif spec.fault == "reversed_route":
+        route = Route(route.xy[::-1], name=route.name)
+    return Drive(spec, Inputs(log, route, sim.frame), road, sim.tunnels)
+
+
+def _direction(route: Route) -> np.ndarray:
+    d = route.xy[-1] - route.xy[0]
+    out: np.ndarray = d / np.hypot(*d)
+    return out
+
+
+def _left_of(route: Route) -> np.ndarray:
+    u = _direction(route)
+    return np.array([-u[1], u[0]])
+
+
+def map_biased(
+    road: Route, along_m: float, across_m: float, rotation_deg: float, *, pivot: np.ndarray
+) -> Route:
+    """The road as a biased map draws it: rotated by ``rotation_deg`` about ``pivot`` (the
+    first tunnel's middle: the offset there is the one drawn, the rotation turns it along the
+    tunnel), then moved ``along_m`` along its overall direction and ``across_m`` to its left."""
+    a = math.radians(rotation_deg)
+    rot = np.array([[math.cos(a), -math.sin(a)], [math.sin(a), math.cos(a)]])
+    xy = (road.xy - pivot) @ rot.T + pivot
+    xy = xy + along_m * _direction(road) + across_m * _left_of(road)
+    return Route(xy, name=road.name, source=road.source)
+
+
+def _position_at(log: Log, frame: LocalFrame, t: float) -> np.ndarray:
+    """The truth's E, N at log time ``t``."""
+    truth = log.truth
+    assert truth is not None
+    enu = frame.to_enu(truth.lat, truth.lon, truth.alt)
+    return np.array([np.interp(t, truth.t, enu[:, i]) for i in range(2)])
+
+
+def _first_fix_moved(log: Log, metres: float) -> Log:
+    g = log.gnss
+    lat = g.lat.copy()
+    first = int(np.flatnonzero(g.valid)[0])
+    lat[first] += metres / M_PER_DEG_LAT
+    return dataclasses.replace(log, gnss=dataclasses.replace(g, lat=lat))
+
+
+def _imu_gap(log: Log, tunnels: tuple[tuple[float, float], ...], seconds: float) -> Log:
+    """No IMU for ``seconds`` in the middle of the first tunnel (GNSS and wheels go on)."""
+    a, b = tunnels[0]
+    mid = 0.5 * (a + b)
+    imu = log.imu
+    keep = ~((imu.t >= mid - seconds / 2) & (imu.t < mid + seconds / 2))
+    cut = dataclasses.replace(imu, t=imu.t[keep], gyro=imu.gyro[keep], accel=imu.accel[keep])
+    return dataclasses.replace(log, imu=cut)

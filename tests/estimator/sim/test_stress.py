@@ -1,0 +1,61 @@
+"""The stress corpus (issue 17): reproducible drives whose faults are really there."""
+
+from __future__ import annotations
+
+import numpy as np
+import pytest
+
+from estimator.sim.stress import FAULT_CYCLE, build, drive_spec
+
+
+def test_a_drive_is_a_pure_function_of_its_index() -> None:
+    a, b = build(drive_spec(3)), build(drive_spec(3))
+    assert a.spec == b.spec
+    np.testing.assert_array_equal(a.inputs.log.imu.gyro, b.inputs.log.imu.gyro)
+    np.testing.assert_array_equal(a.inputs.route.xy, b.inputs.route.xy)
+    assert drive_spec(3) != drive_spec(13)
+
+
+def test_the_corpus_draws_every_fault_within_its_bounds() -> None:
+    specs = [drive_spec(i) for i in range(50)]
+    assert {s.fault for s in specs} == set(FAULT_CYCLE)
+    assert all(abs(s.bias_along_m) <= 15 and abs(s.bias_across_m) <= 5 for s in specs)
+    assert all(abs(s.bias_rotation_deg) <= 2 and 0 <= s.gyro_bias_deg_h <= 720 for s in specs)
+    assert all(abs(s.wheel_scale_error) <= 0.02 for s in specs)
+
+
+@pytest.mark.parametrize("fault", ["map_bias", "no_odometer", "bad_first_fix", "imu_gap"])
+def test_each_fault_is_in_the_drive(fault: str) -> None:
+    index = FAULT_CYCLE.index(fault)
+    drive = build(drive_spec(index))
+    spec, log, route = drive.spec, drive.inputs.log, drive.inputs.route
+    assert route is not None
+    # the map is the road moved by the drawn shift and rotation: metres away from it
+    shift = max(abs(spec.bias_along_m), abs(spec.bias_across_m))
+    assert route.project(drive.road.xy).distance.max() >= 0.5 * shift
+    if fault == "no_odometer":
+        assert log.wheel is None
+    if fault == "bad_first_fix":
+        clean = build(drive_spec(index + 10)).inputs.log  # same fault, other draws: just types
+        assert clean.gnss.valid.any()
+        first = int(np.flatnonzero(log.gnss.valid)[0])
+        frame = drive.inputs.frame
+        fix = frame.to_enu(log.gnss.lat[first], log.gnss.lon[first])[0, :2]
+        truth = frame.to_enu(log.truth.lat, log.truth.lon)[:, :2]
+        assert np.hypot(*(truth - fix).T).min() > 0.8 * spec.first_fix_off_m
+    if fault == "imu_gap":
+        assert np.max(np.diff(log.imu.t)) == pytest.approx(spec.imu_gap_s, abs=0.05)
+
+
+def test_the_runner_gives_a_row_of_finite_figures() -> None:
+    import sys
+    from pathlib import Path
+
+    sys.path.insert(0, str(Path(__file__).resolve().parents[3] / "scripts"))
+    from stress_corpus import RUNS, run_drive, summary
+
+    row = run_drive(1)
+    assert row["error"] == ""
+    for label in RUNS:
+        assert np.isfinite(row[f"{label}_truth_rmse_m"]) and np.isfinite(row[f"{label}_nees_mean"])
+    assert "| all (1) | baseline |" in summary([row])
