@@ -12,8 +12,10 @@ deviations measured from the learned lane) with the default parameters, plus:
 
 - ``routefuse + heading obs.``: ``extensions.heading_observation = true``;
 - ``no wheel``: the same log with its wheel-speed topic dropped (IMU + GNSS only);
-- one row per extension switched off alone (the ablation table);
-- the entry error at each tunnel portal with and without the fixed-lag re-run.
+- one row per extension switched from its default alone (the ablation table);
+- the entry error at each tunnel portal with and without the fixed-lag re-run;
+- a biased map: the route moved rigidly 10 m along the road's overall direction and 3.5 m
+  across it (as SD-map routes are), with the extensions that address it switched on.
 
 Every number in those tables comes from this script; rerun it after changing the estimator.
 """
@@ -43,6 +45,7 @@ from estimator.evaluation.metrics import (  # noqa: E402
 from estimator.log import Log  # noqa: E402
 from estimator.params import ExtensionParams, Params, with_values  # noqa: E402
 from estimator.pipeline import open_inputs, run_methods  # noqa: E402
+from estimator.pipeline.inputs import Inputs  # noqa: E402
 from estimator.results import Run  # noqa: E402
 from estimator.route import Route  # noqa: E402
 
@@ -82,13 +85,49 @@ def _entry_errors(r: Run, route: Route, log: Log) -> list[float]:
     return [float(np.interp(a, ts.t, ts.h_err_m)) for a, _ in r.degraded_intervals]
 
 
+BIASED_RUNS = {
+    "baseline": ("baseline", {}),
+    "routefuse": ("proposed", {}),
+    "routefuse + `map_bias`": ("proposed", {"extensions.map_bias": True}),
+    "routefuse + `reanchor`": ("proposed", {"extensions.reanchor": True}),
+    "routefuse + `map_bias` + `reanchor`": (
+        "proposed",
+        {"extensions.map_bias": True, "extensions.reanchor": True},
+    ),
+}
+"""label: (method, parameters) of the runs on the biased map"""
+
+
+def biased_route(route: Route, along_m: float = 10.0, across_m: float = 3.5) -> Route:
+    """``route`` moved rigidly ``along_m`` along its overall direction (first to last vertex)
+    and ``across_m`` to the left of it."""
+    d = route.xy[-1] - route.xy[0]
+    u = d / np.hypot(*d)
+    return Route(route.xy + along_m * u + across_m * np.array([-u[1], u[0]]), name=route.name)
+
+
+def _biased_map(inp: Inputs) -> dict[str, tuple[float, float]]:
+    """Truth RMSE / route deviation RMSE of each of :data:`BIASED_RUNS` on the biased map."""
+    assert inp.route is not None
+    moved = dataclasses.replace(inp, route=biased_route(inp.route))
+    out = {}
+    for label, (method, values) in BIASED_RUNS.items():
+        r = run_methods(moved, with_values(Params(), values), methods=(method,))[method]
+        mm = _metrics(r, moved.route, moved.log)  # type: ignore[arg-type]
+        assert mm.truth is not None
+        out[label] = (mm.truth.rmse_h_err_m or 0.0, mm.route.rmse_pos_dev_m or 0.0)
+    return out
+
+
 def measure() -> dict[str, str]:
     """Every table, as markdown, by name."""
     main_rows, wheel_rows, readme_rows = [], [], []
     ablation: dict[str, dict[str, tuple[float, float]]] = {}
+    biased: dict[str, dict[str, tuple[float, float]]] = {}
     entry_lines = []
     matches = []
     heading_on = with_values(Params(), {"extensions.heading_observation": True})
+    defaults = ExtensionParams()
     switches = [f.name for f in dataclasses.fields(ExtensionParams)]
     for name in SAMPLES:
         t_start = time.perf_counter()
@@ -130,18 +169,19 @@ def measure() -> dict[str, str]:
             (name, "routefuse, no wheel", _metrics(nw_prop, route, nw)),
             (name, "routefuse + heading obs., no wheel", _metrics(nw_head, route, nw)),
         ]
-        # each extension off alone
+        # each extension switched from its default alone
         ablation[name] = {}
         for sw in switches:
-            if sw == "heading_observation":
-                continue
-            p = with_values(Params(), {f"extensions.{sw}": False})
+            flipped = not getattr(defaults, sw)
+            p = with_values(Params(), {f"extensions.{sw}": flipped})
             r = run_methods(inp, p, methods=("proposed",), reuse=session)["proposed"]
             mm = _metrics(r, route, log)
             assert mm.truth is not None
-            ablation[name][sw] = (mm.truth.rmse_h_err_m or 0.0, mm.route.rmse_pos_dev_m or 0.0)
+            label = f"`{sw}` {'on' if flipped else 'off'}"
+            ablation[name][label] = (mm.truth.rmse_h_err_m or 0.0, mm.route.rmse_pos_dev_m or 0.0)
+        biased[name] = _biased_map(inp)
         assert m["proposed"].truth is not None
-        ablation[name]["(none off)"] = (
+        ablation[name]["(defaults)"] = (
             m["proposed"].truth.rmse_h_err_m or 0.0,
             m["proposed"].route.rmse_pos_dev_m or 0.0,
         )
@@ -154,15 +194,20 @@ def measure() -> dict[str, str]:
         print(f"{name}: {time.perf_counter() - t_start:.0f} s", file=sys.stderr, flush=True)
 
     sw_names = [*next(iter(ablation.values()))]
-    head = "| extension switched off | " + " | ".join(SAMPLES) + " |"
+    head = "| extension switched from its default | " + " | ".join(SAMPLES) + " |"
     abl = [head, "|" + "---|" * (len(SAMPLES) + 1)]
     for sw in sw_names:
         cells = [f"{ablation[n][sw][0]:.2f} / {ablation[n][sw][1]:.3f}" for n in SAMPLES]
-        abl.append(f"| `{sw}` | " + " | ".join(cells) + " |")
+        abl.append(f"| {sw} | " + " | ".join(cells) + " |")
+    bias_rows = [f"| run on the biased map | {' | '.join(SAMPLES)} |", "|" + "---|" * 5]
+    for label in BIASED_RUNS:
+        cells = [f"{biased[n][label][0]:.2f} / {biased[n][label][1]:.3f}" for n in SAMPLES]
+        bias_rows.append(f"| {label} | " + " | ".join(cells) + " |")
     return {
         "methods": format_table(main_rows, style="markdown"),
         "no-wheel": format_table(wheel_rows, style="markdown"),
         "ablation": "\n".join(abl),
+        "biased-map": "\n".join(bias_rows),
         "entry": "\n".join([ENTRY_HEAD, "|---|---|---|---|", *entry_lines]),
         "matches": "\n".join([MATCH_HEAD, "|---|---|---|", *matches]),
         "readme": format_table(readme_rows, style="markdown"),
