@@ -46,6 +46,15 @@ def _transfers(*guis: viser.GuiApi) -> list[tuple[str, dict[str, Any]]]:
     return [item for states in seen.values() for item in list(states.items())]
 
 
+def loaded_markdown(session: Session) -> str:
+    """What is loaded: each file's name and full path, escaped."""
+    return (
+        f"**Loaded:** log **{markdown_text(session.log_name)}** "
+        f"({markdown_text(str(session.log_path))}) · route "
+        f"**{markdown_text(session.route_name)}** ({markdown_text(str(session.route_path))})"
+    )
+
+
 class FilesPanel:
     """Choose a log and its route from the listing, open them, upload more."""
 
@@ -56,6 +65,7 @@ class FilesPanel:
         listing = self.controller.folders.listing()
         logs = tuple(listing.logs) or (NONE,)
         routes = tuple(listing.routes) or (NONE,)
+        self.loaded = gui.add_markdown("**Loaded:** nothing yet")
         self.log_choice = gui.add_dropdown("log", logs, initial_value=logs[0])
         self.log_choice.on_update(self._on_log_choice)
         self.route_choice = gui.add_dropdown("route file", routes, initial_value=routes[0])
@@ -196,7 +206,9 @@ class FilesPanel:
         return on_upload
 
     def show_session(self, session: Session) -> None:
-        """Select the files a new session was opened from."""
+        """Name the files a new session was opened from (also when they are not in the listing:
+        given on the command line outside the data folders) and select them where listed."""
+        self.loaded.content = loaded_markdown(session)
         if session.log_name in self.log_choice.options:
             self._show("log", session.log_name)
         if session.route_name in self.route_choice.options:

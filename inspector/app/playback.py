@@ -121,6 +121,21 @@ class PlaybackPanel:
             "<small>keys: ← → frame · ↑ ↓ ten frames · space play · N / P next / previous "
             "attempt · R / E next / previous rejected</small>"
         )
+        self._enable(False)
+
+    def _enable(self, on: bool) -> None:
+        """Nothing to step before the first session: the controls are disabled (a button group
+        cannot be, so it is hidden) until one is shown."""
+        for control in (
+            self.time_slider,
+            self.play_button,
+            self.speed,
+            self.follow_box,
+            self.view_button,
+        ):
+            control.disabled = not on
+        self.step_buttons.visible = on
+        self.match_buttons.visible = on
 
     def add_hotkeys(self, gui: viser.GuiApi) -> None:
         """The keyboard twins of the buttons (after the tabs, as viser lists commands)."""
@@ -200,6 +215,7 @@ class PlaybackPanel:
         self.time_slider.max = max(tl.duration, dt)
         self.time_slider.step = round(max(dt, 1e-3), 3)
         self.status.content = status_markdown(session)
+        self._enable(True)
 
     def show_time(self, s: Session, t: float) -> None:
         """The frame line and the slider at time ``t``."""

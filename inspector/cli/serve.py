@@ -151,6 +151,32 @@ def check_listen_address(host: str, port: int) -> None:
                 ) from None
 
 
+class TerminalProgress:
+    """Loading progress on the terminal: a line per stage (decoding, baseline, proposed,
+    views) and per quarter of it, not one per callback."""
+
+    def __init__(self) -> None:
+        self._last: tuple[str, int] = ("", -1)
+
+    def __call__(self, fraction: float, message: str) -> None:
+        quarter = min(int(fraction * 4), 4)
+        if (message, quarter) == self._last or fraction >= 1.0:
+            return
+        self._last = (message, quarter)
+        print(f"  {message} ({100 * fraction:.0f} %)", flush=True)
+
+
+def kernels_cached() -> bool:
+    """Whether numba's cache of the filter kernels is on disk beside them (else the first run
+    compiles them)."""
+    from importlib.util import find_spec
+
+    spec = find_spec("estimator.filter")
+    if spec is None or spec.origin is None:
+        return False
+    return any((Path(spec.origin).parent / "__pycache__").glob("*.nbi"))
+
+
 def start(
     *,
     host: str,
@@ -254,6 +280,12 @@ def execute(args: argparse.Namespace) -> int:
         f" and GNSS outages {format_outages(normalise_outages(outages))} s" if outages else ""
     )
     print(f"loading {log.name} with route {route.name}{injected} ...", flush=True)
+    if not kernels_cached():
+        print(
+            "(the first run on this machine compiles the filter kernels: about half a minute, "
+            "then they are cached)",
+            flush=True,
+        )
 
     def loaded(session: Session) -> None:
         tl = session.timeline
@@ -265,6 +297,7 @@ def execute(args: argparse.Namespace) -> int:
         )
 
     controller.subscribe(
+        on_progress=TerminalProgress(),
         on_session=loaded,
         on_error=lambda exc: print(f"routefuse: error: {exc}", file=sys.stderr, flush=True),
     )

@@ -158,3 +158,21 @@ def test_serve_injects_the_outages_into_the_first_session_only():
         app.close()
         controller.close()
         server.stop()
+
+
+def test_terminal_progress_is_a_line_per_stage_and_quarter(capsys):
+    from inspector.cli.serve import TerminalProgress
+
+    progress = TerminalProgress()
+    for k in range(101):
+        progress(k / 200, "loading drive.mcap")
+    for k in range(51):
+        progress(0.5 + k / 100, "baseline")
+    lines = capsys.readouterr().out.splitlines()
+    assert lines == [
+        "  loading drive.mcap (0 %)",
+        "  loading drive.mcap (25 %)",
+        "  loading drive.mcap (50 %)",
+        "  baseline (50 %)",
+        "  baseline (75 %)",
+    ]
