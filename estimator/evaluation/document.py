@@ -23,8 +23,11 @@ def results_document(
     metrics: Mapping[str, MethodMetrics],
     *,
     outages: Sequence[tuple[float, float]] = (),
+    lane_offset_subtracted: bool = False,
 ) -> dict[str, Any]:
-    """The document of ``runs`` (by method, in the order they ran) and their ``metrics``."""
+    """The document of ``runs`` (by method, in the order they ran) and their ``metrics``;
+    ``lane_offset_subtracted`` says which measure the route deviations are (from the route
+    line, or from the lane learned under GNSS)."""
     methods = list(runs)
     first = next(iter(runs.values()))
     matching = [m for m in methods if m != "baseline"]
@@ -36,6 +39,7 @@ def results_document(
         "duration_s": log.duration_s,
         "distance_m": distance_m(first),
         "degraded_intervals": [[a - first.t0, b - first.t0] for a, b in first.degraded_intervals],
+        "route_deviation_from": "learned lane" if lane_offset_subtracted else "route line",
         "methods": {m: metrics[m].to_dict() for m in methods},
         "matches": summaries[key]
         if key is not None

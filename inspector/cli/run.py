@@ -190,7 +190,15 @@ def execute(args: argparse.Namespace) -> int:
     print(format_table([(Path(args.log).name, method, m) for method, m in metrics.items()]))
     _print_notes(named, {m: match_summary(r) for m, r in named.items() if m != "baseline"})
     if args.json is not None:
-        doc = results_document(args.log, str(route_path), log, named, metrics, outages=outages)
+        doc = results_document(
+            args.log,
+            str(route_path),
+            log,
+            named,
+            metrics,
+            outages=outages,
+            lane_offset_subtracted=args.subtract_lane_offset,
+        )
         try:
             args.json.write_text(json.dumps(doc, indent=2) + "\n", encoding="utf-8")
         except OSError as exc:

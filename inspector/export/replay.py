@@ -99,13 +99,15 @@ def export_log(
     replay: ReplayOptions = ReplayOptions(),
     progress: Progress | None = None,
     cache_dir: Path | None = None,
+    subtract_lane_offset: bool = False,
 ) -> ExportResult:
     """Run the baseline and ``method`` over one log and write every export file into
     ``out_dir`` (created if missing; files of an earlier export are overwritten).
 
     ``outages``: (start, end) seconds after the log start where GNSS is removed, as
     ``routefuse run --outage``. ``route_feature``: which line of a route file holding several
-    (name or index). ``cache_dir``: the decoded-log cache (default: the user's)."""
+    (name or index). ``cache_dir``: the decoded-log cache (default: the user's).
+    ``subtract_lane_offset``: route deviations from the learned lane, not the route line."""
     from estimator.pipeline import open_inputs, run_methods
 
     log_path, route_path, out = Path(log_path), Path(route_path), Path(out_dir)
@@ -137,7 +139,13 @@ def export_log(
     baseline, compared = session["baseline"], session[method]
     lap("run_s")
     doc = export_tables.metrics_document(
-        inputs, baseline, compared, log_path, route_path, outages=outages
+        inputs,
+        baseline,
+        compared,
+        log_path,
+        route_path,
+        outages=outages,
+        subtract_lane_offset=subtract_lane_offset,
     )
     try:
         files, n_frames = _write_files(out, inputs, baseline, compared, doc, replay, steps)

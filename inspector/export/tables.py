@@ -52,15 +52,28 @@ def metrics_document(
     route_path: Path,
     *,
     outages: Sequence[tuple[float, float]] = (),
+    subtract_lane_offset: bool = False,
 ) -> dict[str, Any]:
-    """The ``routefuse run --json`` document of the two runs (built by the same function)."""
+    """The ``routefuse run --json`` document of the two runs (built by the same function);
+    ``subtract_lane_offset``: route deviations from the learned lane, as the README's table."""
     from estimator.evaluation.document import results_document
 
     runs: dict[str, Run] = {r.method: r for r in (baseline, compared)}
     metrics = {
-        m: method_metrics(r, inputs.route, inputs.log, params=r.params) for m, r in runs.items()
+        m: method_metrics(
+            r, inputs.route, inputs.log, params=r.params, subtract_lane_offset=subtract_lane_offset
+        )
+        for m, r in runs.items()
     }
-    return results_document(log_path, route_path, inputs.log, runs, metrics, outages=outages)
+    return results_document(
+        log_path,
+        route_path,
+        inputs.log,
+        runs,
+        metrics,
+        outages=outages,
+        lane_offset_subtracted=subtract_lane_offset,
+    )
 
 
 def write_tables(
@@ -115,7 +128,8 @@ def _write_csv(path: Path, header: Sequence[str], rows: Sequence[Sequence[Any]])
 
 
 def write_metrics_csv(path: Path, doc: dict[str, Any]) -> None:
-    """One row per method: the route columns, then the truth columns (empty without truth)."""
+    """One row per method: the route columns, then the truth columns (empty without truth), and
+    which measure the route columns are (from the route line or the learned lane)."""
     methods: dict[str, dict[str, Any]] = doc["methods"]
     route_keys = list(next(iter(methods.values()))["route"])
     truth_keys: list[str] = []
@@ -127,9 +141,14 @@ def write_metrics_csv(path: Path, doc: dict[str, Any]) -> None:
     for name, m in methods.items():
         truth = m.get("truth") or {}
         rows.append(
-            [name, *[m["route"][k] for k in route_keys], *[truth.get(k) for k in truth_keys]]
+            [
+                name,
+                *[m["route"][k] for k in route_keys],
+                *[truth.get(k) for k in truth_keys],
+                doc.get("route_deviation_from", "route line"),
+            ]
         )
-    _write_csv(path, ["method", *route_keys, *truth_keys], rows)
+    _write_csv(path, ["method", *route_keys, *truth_keys, "route_deviation_from"], rows)
 
 
 def _xy(a: Any) -> tuple[float, float]:
@@ -498,7 +517,10 @@ def write_report(
     esc = html.escape
     path = out / "report.html"
     methods: dict[str, dict[str, Any]] = doc["methods"]
-    tables = _html_table(methods, "route", "Deviation from the route")
+    measured_from = doc.get("route_deviation_from", "route line")
+    tables = _html_table(
+        methods, "route", f"Deviation from the route (measured from the {measured_from})"
+    )
     if any(m.get("truth") for m in methods.values()):
         tables += _html_table(methods, "truth", "Error against ground truth")
     matches = doc["matches"]

@@ -123,3 +123,32 @@ def test_help_lists_the_options(capsys):
     text = capsys.readouterr().out
     for option in ("--batch", "--outage", "--fps", "--time-lapse", "--config", "--imu-topic"):
         assert option in text
+
+
+def test_subtract_lane_offset_is_offered_and_every_table_says_which_measure(tmp_path, capsys):
+    """As the README's table: route deviations from the learned lane (issue 19)."""
+    import json
+
+    from estimator.sim import simulate
+    from inspector.cli.main import main
+
+    sim = simulate("short_tunnel", seed=3, duration_s=60.0)
+    log, route = sim.write(tmp_path)
+    outs = {}
+    for flag in ([], ["--subtract-lane-offset"]):
+        out = tmp_path / ("lane" if flag else "line")
+        argv = ["export", str(log), "--route", str(route), "--out", str(out), "--fps", "2", *flag]
+        assert main(argv) == 0
+        printed = capsys.readouterr().out
+        doc = json.loads((out / "metrics.json").read_text())
+        outs[bool(flag)] = doc
+        measure = "learned lane" if flag else "route line"
+        assert doc["route_deviation_from"] == measure
+        assert f"(from the {measure})" in printed
+        assert measure in (out / "metrics.csv").read_text()
+        assert f"measured from the {measure}" in (out / "report.html").read_text()
+    assert outs[True]["methods"] != outs[False]["methods"]
+    code = main(
+        ["export", "--batch", str(tmp_path), "--out", str(tmp_path / "b"), "--subtract-lane-offset"]
+    )
+    assert code == 2
