@@ -19,7 +19,7 @@ from typing import Any, Literal
 import numpy as np
 from numpy.typing import NDArray
 
-from estimator.matching import track_on_route
+from estimator.matching import project_on_route, track_on_route
 from estimator.params import Params
 from estimator.results import MatchRecord
 from estimator.route import Route
@@ -47,6 +47,41 @@ def refused_off_route(m: MatchRecord) -> str | None:
     if failed and failed[0].gate.refuses_off_route:
         return failed[0].name
     return None
+
+
+REACQUIRE_MARGIN_M = 3.0
+"""the followed track is re-acquired where the route's nearest point is this much closer"""
+MAX_REACQUIRE = 50
+"""times the followed track may be re-acquired in one run (each costs one more follow)"""
+
+
+def followed_distance(route: Route, xy: F64) -> F64:
+    """Distance of each point from the route, followed along it
+    (:func:`estimator.matching.track_on_route`, so a crossing or a return leg does not capture
+    the vehicle), re-acquired from the nearest point of the whole route wherever that is
+    :data:`REACQUIRE_MARGIN_M` closer than the followed one: at a figure-eight's crossing the
+    local search may slide onto the other leg and then follow it away from the vehicle for
+    ever."""
+    n = len(xy)
+    dist = np.empty(n)
+    _, foot = _nearest(route, xy)
+    nearest = np.hypot(*(xy - foot).T)
+    start = 0
+    for _ in range(MAX_REACQUIRE):
+        s, _ = track_on_route(route, xy[start:])
+        # the distance to the foot point: also right past either end of the route
+        dist[start:] = np.hypot(*(xy[start:] - route.point_at(s)).T)
+        lost = np.flatnonzero(dist[start:] > nearest[start:] + REACQUIRE_MARGIN_M)
+        if not len(lost):
+            break
+        start += int(lost[0])
+    return dist
+
+
+def _nearest(route: Route, xy: F64) -> tuple[F64, F64]:
+    """Arc length and foot point of each point's nearest point on the whole route."""
+    s, _ = project_on_route(route, xy)
+    return s, route.point_at(s)
 
 
 def _spans(t: F64, mask: NDArray[np.bool_]) -> tuple[tuple[float, float], ...]:
@@ -84,11 +119,9 @@ class OffRoute:
         xy = np.asarray(track.xy, np.float64)
         dist = np.full(len(t), np.nan)
         ok = np.all(np.isfinite(xy), axis=1)
-        if ok.sum() >= 1 and len(route.xy) >= 2:
-            s, _ = track_on_route(route, xy[ok])
-            # the distance to the foot point: also right past either end of the route
-            dist[ok] = np.hypot(*(xy[ok] - route.point_at(s)).T)
         threshold = off_route_threshold(params)
+        if ok.sum() >= 1 and len(route.xy) >= 2:
+            dist[ok] = followed_distance(route, xy[ok])
         off = np.nan_to_num(dist, nan=0.0) > threshold
         return cls(
             source=source,

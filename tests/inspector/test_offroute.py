@@ -124,3 +124,85 @@ def test_on_route_session_has_no_off_route_state():
     scene = SceneData.build(baseline=drifting, proposed=drifting, route=make_route(), log=None)
     off = OffRoute.build(scene, make_route(), Params())
     assert off.spans and off.spans[0][0] > 20.0 and "OFF-ROUTE" in off.summary()
+
+
+# --- routes of every shape (issue 19): the vehicle on the route is never off it ------------
+
+
+def _arc(center, radius, a0, a1, n=60):
+    a = np.linspace(np.radians(a0), np.radians(a1), n)
+    return np.column_stack([center[0] + radius * np.cos(a), center[1] + radius * np.sin(a)])
+
+
+def _parking_loop() -> np.ndarray:
+    """A straight extension, a loop around a parking lot that crosses its own entry road, the
+    way back out and a straight extension at the other end."""
+    approach = np.column_stack([np.linspace(-800, 0, 40), np.zeros(40)])
+    loop = _arc((0.0, 60.0), 60.0, -90, 270, 120)[1:]
+    leave = np.column_stack([np.zeros(30), np.linspace(-2, -700, 30)])
+    return np.vstack([approach, loop, leave])
+
+
+def _figure_eight() -> np.ndarray:
+    t = np.linspace(0, 2 * np.pi, 400)
+    return np.column_stack([300 * np.sin(t), 150 * np.sin(2 * t)])
+
+
+def _out_and_back() -> np.ndarray:
+    out = np.column_stack([np.linspace(0, 1500, 80), np.zeros(80)])
+    turn = _arc((1500.0, 6.0), 6.0, -90, 90, 12)[1:]
+    back = np.column_stack([np.linspace(1500, 0, 80), np.full(80, 12.0)])
+    return np.vstack([out, turn, back[1:]])
+
+
+@dataclass(frozen=True)
+class _Track:
+    t: np.ndarray
+    xy: np.ndarray
+
+
+@dataclass(frozen=True)
+class _Scene:
+    truth: _Track
+    proposed: _Track
+    t0: float = 0.0
+    matches: tuple = ()
+
+
+def _drive_along(route: Route, lane: float = -1.8, speed: float = 12.0) -> _Track:
+    """A vehicle keeping its lane along the whole route, a fix every 0.1 s."""
+    s = np.arange(0.0, route.length, speed * 0.1)
+    xy = route.point_at(s) + lane * route.normal_at(s)
+    return _Track(s / speed, xy)
+
+
+@pytest.mark.parametrize(
+    "shape", [_parking_loop, _figure_eight, _out_and_back], ids=lambda f: f.__name__[1:]
+)
+def test_a_vehicle_on_a_route_of_any_shape_is_never_off_it(shape):
+    route = Route(shape())
+    track = _drive_along(route)
+    off = OffRoute.build(_Scene(track, track), route, Params())
+    assert not off.off.any(), (
+        f"{off.total_s:.0f} s off-route, up to {np.nanmax(off.distance_m):.0f} m"
+    )
+    # the lane (1.8 m) nearly everywhere: a followed track that slid onto another leg (at a
+    # crossing, within the margin) is re-acquired from the nearest point of the whole route
+    assert np.nanmax(off.distance_m) < 5.0
+    assert np.mean(np.abs(off.distance_m - 1.8) < 0.5) > 0.99
+    # 300 m away from all of it is off-route
+    far = _Track(track.t, track.xy + np.array([0.0, 2000.0]))
+    assert OffRoute.build(_Scene(far, far), route, Params()).off.all()
+
+
+def test_a_vehicle_starting_on_the_extension_side_is_picked_up_where_it_drives():
+    """Started far off the route, then driving onto it from its middle (the track lost at the
+    start must be re-acquired, not followed along the wrong end)."""
+    route = Route(_parking_loop())
+    on = _drive_along(route)
+    start = np.column_stack([np.linspace(-400, -400, 50), np.linspace(400, 60, 50)])
+    xy = np.vstack([start, on.xy[on.xy[:, 0] > -50]])
+    track = _Track(np.arange(len(xy)) * 0.1, xy)
+    off = OffRoute.build(_Scene(track, track), route, Params())
+    assert off.off[:30].all()  # 400 m away at first
+    assert not off.off[60:].any()
