@@ -19,6 +19,7 @@ import numpy as np
 from numpy.typing import ArrayLike, NDArray
 
 from estimator.nav.frames import LocalFrame
+from estimator.route import Route
 
 F64 = NDArray[np.float64]
 
@@ -122,3 +123,18 @@ def route_geojson(
 
 def write_geojson(path: str | Path, doc: dict[str, Any]) -> None:
     Path(path).write_text(json.dumps(doc, indent=1) + "\n")
+
+
+def parallel_bore(
+    route: Route, s0: float, s1: float, shift_m: float, *, ramp_m: float = 80.0
+) -> Route:
+    """``route`` with its stretch from arc length ``s0`` to ``s1`` drawn ``shift_m`` to the left
+    (a map routing through the other bore of a twin tunnel), joined by cosine ramps of
+    ``ramp_m`` at both ends; vertices every 10 m over the stretch and its ramps."""
+    lo, hi = s0 - ramp_m, s1 + ramp_m
+    s_new = np.unique(np.r_[route.s[route.s < lo], np.arange(lo, hi, 10.0), route.s[route.s > hi]])
+    s_new = s_new[(s_new >= 0) & (s_new <= route.length)]
+    weight = np.clip(np.minimum(s_new - lo, hi - s_new) / ramp_m, 0.0, 1.0)
+    weight = 0.5 - 0.5 * np.cos(np.pi * weight)
+    xy = route.point_at(s_new) + (shift_m * weight)[:, None] * route.normal_at(s_new)
+    return Route(xy, name=route.name, source=route.source)

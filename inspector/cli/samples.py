@@ -9,6 +9,9 @@ from pathlib import Path
 
 DEFAULT_SAMPLE = "long_tunnel"
 """The sample ``routefuse serve`` opens when given no log."""
+DEFAULT_TRAP_ROUTE = "long_tunnel_parallel_bore.route.geojson"
+"""The route it opens the sample with: the middle of the tunnel drawn along the parallel bore
+(``scripts/make_trap_route.py``), so the first view shows the rejection workflow."""
 SAMPLES_FOLDER = "sample_logs"
 
 _INSPECTOR = Path(__file__).resolve().parents[1]

@@ -21,7 +21,12 @@ from inspector.cli.options import (
     params_from_args,
     parse_outage,
 )
-from inspector.cli.samples import DEFAULT_SAMPLE, find_sample_logs, sample_log_candidates
+from inspector.cli.samples import (
+    DEFAULT_SAMPLE,
+    DEFAULT_TRAP_ROUTE,
+    find_sample_logs,
+    sample_log_candidates,
+)
 
 if TYPE_CHECKING:
     import viser
@@ -48,7 +53,7 @@ def add_arguments(parser: argparse.ArgumentParser) -> None:
         "log",
         nargs="?",
         metavar="LOG",
-        help=f"log to open (default: the bundled {DEFAULT_SAMPLE} sample)",
+        help=f"log to open (default: the bundled {DEFAULT_SAMPLE} sample, with a trap route)",
     )
     parser.add_argument(
         "--route", metavar="ROUTE", help="route file (default: LOG's <name>.route.* beside it)"
@@ -100,6 +105,9 @@ def resolve_inputs(log: str | None, route: str | None) -> tuple[Path, Path]:
                 f"the bundled sample log is not installed (looked in {looked}); give a LOG",
             )
         log_path = SAMPLE_LOGS / f"{DEFAULT_SAMPLE}.mcap"
+        trap = SAMPLE_LOGS / DEFAULT_TRAP_ROUTE
+        if route is None and trap.is_file():
+            return log_path, trap
     else:
         log_path = Path(log).expanduser()
         try:

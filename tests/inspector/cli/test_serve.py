@@ -28,7 +28,32 @@ def test_defaults_bind_localhost_and_open_the_long_tunnel_sample():
     if not serve.SAMPLE_LOGS.joinpath("long_tunnel.mcap").exists():
         pytest.skip("sample_logs/long_tunnel.mcap is not generated yet")
     log, route = serve.resolve_inputs(None, None)
-    assert log.name == "long_tunnel.mcap" and route.name == "long_tunnel.route.geojson"
+    # with its trap route: the middle of the tunnel along the parallel bore, refused
+    assert log.name == "long_tunnel.mcap"
+    assert route.name == "long_tunnel_parallel_bore.route.geojson"
+    assert serve.resolve_inputs(str(log), None)[1].name == "long_tunnel.route.geojson"
+
+
+def test_the_trap_route_gives_the_default_view_refusals_and_keeps_the_estimate():
+    """The bundled trap: 1.2 km of the tunnel drawn 25 m over. Its matches are refused and the
+    run stays within half a metre of the sample's own route (no wrong road followed)."""
+    from estimator.evaluation.metrics import method_metrics
+    from estimator.params import Params
+    from estimator.pipeline import open_inputs, run_methods
+
+    if not serve.SAMPLE_LOGS.joinpath("long_tunnel.mcap").exists():
+        pytest.skip("sample_logs/long_tunnel.mcap is not generated yet")
+    log, trap = serve.resolve_inputs(None, None)
+    rmse = {}
+    for route in (trap, log.with_name("long_tunnel.route.geojson")):
+        inputs = open_inputs(log, route)
+        run = run_methods(inputs, Params(), methods=("proposed",))["proposed"]
+        truth = method_metrics(run, inputs.route, inputs.log).truth
+        rmse[route.name] = truth.rmse_h_err_m
+        if route == trap:
+            refused = [m for m in run.matches if not m.accepted]
+            assert len(refused) >= 20 and len(refused) < len(run.matches) / 2
+    assert rmse[trap.name] < rmse["long_tunnel.route.geojson"] + 0.5
 
 
 def test_route_is_found_beside_the_log_or_the_error_says_what_to_do(tmp_path):
