@@ -57,6 +57,15 @@ def add_arguments(parser: argparse.ArgumentParser) -> None:
     )
     parser.add_argument("--out", metavar="DIR", required=True, help="output folder")
     parser.add_argument(
+        "--compare",
+        nargs=2,
+        metavar=("A.toml", "B.toml"),
+        default=None,
+        help="run the method with two parameter sets and write their comparison (metrics of A, "
+        "B and B - A; every attempt whose verdict changed, with both gate tables) instead of a "
+        "replay",
+    )
+    parser.add_argument(
         "--subtract-lane-offset",
         action="store_true",
         help="measure route deviations from the learned lane instead of the route line (as the "
@@ -109,6 +118,39 @@ class _Progress:
         self.last, self.stage = line, stage
 
 
+def _compare(
+    args: argparse.Namespace,
+    log: Path,
+    out: Path,
+    outages: tuple[tuple[float, float], ...],
+    topics: TopicChoice,
+) -> int:
+    from inspector.export.compare import export_comparison
+
+    set_a, set_b = (Path(p).expanduser() for p in args.compare)
+    comparison, files = export_comparison(
+        log,
+        Path(args.route).expanduser(),
+        out,
+        set_a,
+        set_b,
+        method=args.method,
+        outages=outages,
+        topics=topics,
+        route_feature=args.route_feature,
+    )
+    for label, va, vb in comparison.metrics:
+        if va is not None and vb is not None:
+            print(f"{label}: A {va:.3f}, B {vb:.3f} (B - A {vb - va:+.3f})")
+    print(
+        f"accepted A {comparison.accepted[0]} / {comparison.attempts[0]}, "
+        f"B {comparison.accepted[1]} / {comparison.attempts[1]}; "
+        f"{len(comparison.changed)} attempts changed verdict"
+    )
+    print(f"wrote {len(files)} files to {out} (open compare.html)")
+    return 0
+
+
 def execute(args: argparse.Namespace) -> int:
     from inspector.export import (
         ReplayOptions,
@@ -129,6 +171,8 @@ def execute(args: argparse.Namespace) -> int:
             raise ConfigError("--batch", "give either LOG --route ROUTE or --batch, not both")
         if args.workers is not None and args.workers < 1:
             raise ConfigError("--workers", f"{args.workers}: at least one worker")
+        if args.compare is not None:
+            raise ConfigError("--compare", "compares two sets on one log, not a batch")
         if args.subtract_lane_offset:
             raise ConfigError(
                 "--subtract-lane-offset",
@@ -158,6 +202,8 @@ def execute(args: argparse.Namespace) -> int:
     log = Path(args.log).expanduser()
     if not log.exists():
         raise RoutefuseError(log, "no such file or folder")
+    if args.compare is not None:
+        return _compare(args, log, out, outages, topics)
 
     def report(stage: str, fraction: float) -> None:
         progress(0, 1, log, stage, fraction)

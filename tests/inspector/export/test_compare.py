@@ -1,0 +1,64 @@
+"""``routefuse export --compare A.toml B.toml`` (issue 19): A, B and B - A, and every attempt
+whose verdict changed with both gate tables, headless."""
+
+from __future__ import annotations
+
+import csv
+from pathlib import Path
+
+from inspector.cli.main import main
+
+SAMPLES = Path(__file__).resolve().parents[3] / "sample_logs"
+
+
+def test_two_sets_on_one_log_are_compared_attempt_by_attempt(tmp_path, capsys):
+    a = tmp_path / "defaults.toml"
+    a.write_text("")
+    b = tmp_path / "tight <residual>.toml"
+    b.write_text("[gates]\nmax_residual_m = 0.6\n")
+    out = tmp_path / "cmp"
+    argv = [
+        "export",
+        str(SAMPLES / "monaco_tunnel.mcap"),
+        "--route",
+        str(SAMPLES / "monaco_tunnel.route.geojson"),
+        "--out",
+        str(out),
+        "--compare",
+        str(a),
+        str(b),
+    ]
+    assert main(argv) == 0
+    printed = capsys.readouterr().out
+    assert "attempts changed verdict" in printed and "compare.html" in printed
+    with open(out / "changed_verdicts.csv", encoding="utf-8") as f:
+        changed = list(csv.DictReader(f))
+    assert changed, "a tighter residual gate changed no verdict"
+    assert all(r["A_verdict"] != r["B_verdict"] for r in changed)
+    assert any(r["B_verdict"] == "rejected: residual" for r in changed)
+    with open(out / "compare_metrics.csv", encoding="utf-8") as f:
+        rows = {r["quantity"]: r for r in csv.DictReader(f)}
+    accepted = rows["accepted"]
+    assert int(accepted["B"]) < int(accepted["A"])
+    truth = rows["truth horizontal RMSE [m]"]
+    assert abs(float(truth["B - A"]) - (float(truth["B"]) - float(truth["A"]))) < 2e-3
+    page = (out / "compare.html").read_text(encoding="utf-8")
+    assert "tight &lt;residual&gt;.toml" in page and "<residual>" not in page
+    assert page.count("<table>") >= 1 + len(changed)  # each changed attempt: its gate tables
+    assert "http" not in page
+    assert (out / "set_b.toml").read_text().count("max_residual_m = 0.6") == 1
+    assert (
+        main(
+            [
+                *argv[:1],
+                "--batch",
+                str(SAMPLES),
+                "--out",
+                str(tmp_path / "x"),
+                "--compare",
+                str(a),
+                str(b),
+            ]
+        )
+        == 2
+    )
