@@ -18,6 +18,7 @@ import numpy as np
 import viser
 
 from estimator.errors import RoutefuseError
+from inspector.app.compare import ComparePanel
 from inspector.app.files import FilesPanel
 from inspector.app.match import MatchPanel
 from inspector.app.parameters import ParametersPanel
@@ -76,6 +77,8 @@ class ClientView:
         with tabs.add_tab("Match"):
             self.match = MatchPanel(gui)
         self.plots = PlotsPanel(gui, tabs.add_tab("Plots"))
+        with tabs.add_tab("Compare"):
+            self.compare = ComparePanel(self, gui)
         with tabs.add_tab("Layers"):
             self.layer_boxes: dict[str, viser.GuiCheckboxHandle] = {}
             for cls in LAYER_TYPES:
@@ -288,6 +291,7 @@ class ClientView:
             self.playback.show_time(s, t)
             self.match.show(s, t)
             self.plots.show_time(s, t)
+            self.compare.show(s, t)
             if self.follow:
                 self._follow(s.scene, t)
 

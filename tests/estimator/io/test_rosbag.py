@@ -19,7 +19,7 @@ T0 = 1_700_000_000.0
 def _streams(n: int = 400):
     rng = np.random.default_rng(7)
     t = T0 + 0.01 * np.arange(n)
-    imu = ImuData(t, rng.normal(size=(n, 3)), rng.normal(size=(n, 3)) + [0.0, 0.0, 9.81])
+    imu = ImuData(t, rng.normal(size=(n, 3)), rng.normal(size=(n, 3)) + np.array([0.0, 0.0, 9.81]))
     m = n // 10
     status = np.ones(m, np.int8)
     status[5:8] = -1
