@@ -1,10 +1,12 @@
 """Debian Chromium for the browser tests: where it is, the flags this machine's closed network
-needs (without the background-networking ones Chromium floods it with refused connections), and a
-free loopback port for an in-process inspector server."""
+needs (without the background-networking ones Chromium floods it with refused connections), a
+free loopback port, an in-process inspector server and a polling wait."""
 
 from __future__ import annotations
 
 import socket
+import time
+from contextlib import contextmanager
 from pathlib import Path
 
 CHROMIUM = Path("/usr/bin/chromium")
@@ -24,3 +26,36 @@ def free_port() -> int:
     with socket.socket() as s:
         s.bind(("127.0.0.1", 0))
         return s.getsockname()[1]
+
+
+def wait_until(predicate, timeout: float = 30.0, what="condition"):
+    """``predicate()``'s first truthy value, polled every 0.1 s; an AssertionError naming
+    ``what`` (a string, or a callable giving one at the time) past ``timeout`` seconds."""
+    deadline = time.monotonic() + timeout
+    while time.monotonic() < deadline:
+        value = predicate()
+        if value:
+            return value
+        time.sleep(0.1)
+    raise AssertionError(f"timed out waiting for {what() if callable(what) else what}")
+
+
+@contextmanager
+def served(log: Path | None = None, route: Path | None = None, **options):
+    """An in-process inspector on a free loopback port, its first log loaded (when given);
+    yields ``(server, controller, app)`` and stops them afterwards."""
+    from inspector.cli.serve import start
+
+    options.setdefault("data_dirs", [])
+    server, controller, app = start(
+        host="127.0.0.1", port=free_port(), log=log, route=route, **options
+    )
+    try:
+        if log is not None:
+            assert controller.wait_idle(300), "the log did not load"
+            assert controller.session is not None
+        yield server, controller, app
+    finally:
+        app.close()
+        controller.close()
+        server.stop()

@@ -5,11 +5,11 @@ to it, with the Match tab filled. Clicks and reads the page as a person does, in
 from __future__ import annotations
 
 import re
-import time
 from pathlib import Path
 
 import pytest
-from _browser import free_port
+from _browser import served
+from _browser import wait_until as _wait
 
 from estimator.params import Params, with_values
 from inspector.layers import LAYER_TYPES, legend_entries
@@ -22,34 +22,13 @@ TIGHT = with_values(Params(), {"gates.max_residual_m": 0.6})
 
 
 @pytest.fixture(scope="module")
-def served():
-    from inspector.cli.serve import start
-
-    server, controller, app = start(
-        host="127.0.0.1", port=free_port(), data_dirs=[], log=LOG, route=ROUTE, params=TIGHT
-    )
-    try:
-        assert controller.wait_idle(240), "the sample did not load"
-        assert controller.session is not None
-        yield server, controller, app
-    finally:
-        app.close()
-        controller.close()
-        server.stop()
+def session():
+    with served(LOG, ROUTE, params=TIGHT) as running:
+        yield running
 
 
-def _wait(predicate, timeout: float = 40.0, what: str = "condition"):
-    deadline = time.monotonic() + timeout
-    while time.monotonic() < deadline:
-        value = predicate()
-        if value:
-            return value
-        time.sleep(0.1)
-    raise AssertionError(f"timed out waiting for {what}")
-
-
-def test_the_page_opens_at_the_first_refusal_with_a_legend(browser, served, tmp_path):
-    server, controller, app = served
+def test_the_page_opens_at_the_first_refusal_with_a_legend(browser, session, tmp_path):
+    server, controller, app = session
     session = controller.session
     tl = session.timeline
     first_refused = tl.next_match(-1e9, rejected_only=True)

@@ -6,24 +6,14 @@ from __future__ import annotations
 
 import shutil
 import threading
-import time
 from pathlib import Path
 
 from _browser import free_port
+from _browser import wait_until as _wait
 
 REPO = Path(__file__).resolve().parents[2]
 LOG = REPO / "sample_logs" / "monaco_tunnel.mcap"
 ROUTE = REPO / "sample_logs" / "monaco_tunnel.route.geojson"
-
-
-def _wait(predicate, timeout: float = 60.0, what: str = "condition"):
-    deadline = time.monotonic() + timeout
-    while time.monotonic() < deadline:
-        value = predicate()
-        if value:
-            return value
-        time.sleep(0.05)
-    raise AssertionError(f"timed out waiting for {what}")
 
 
 def test_controls_wait_for_the_session_and_the_files_tab_names_it(browser, tmp_path):

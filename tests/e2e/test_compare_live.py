@@ -6,45 +6,25 @@ clicking as a person does."""
 from __future__ import annotations
 
 import re
-import time
 from pathlib import Path
 
 import pytest
-from _browser import free_port
+from _browser import served
+from _browser import wait_until as _wait
 
 REPO = Path(__file__).resolve().parents[2]
 LOG = REPO / "sample_logs" / "monaco_tunnel.mcap"
 ROUTE = REPO / "sample_logs" / "monaco_tunnel.route.geojson"
 
 
-def _wait(predicate, timeout: float = 40.0, what: str = "condition"):
-    deadline = time.monotonic() + timeout
-    while time.monotonic() < deadline:
-        value = predicate()
-        if value:
-            return value
-        time.sleep(0.1)
-    raise AssertionError(f"timed out waiting for {what}")
-
-
 @pytest.fixture(scope="module")
-def served():
-    from inspector.cli.serve import start
-
-    server, controller, app = start(
-        host="127.0.0.1", port=free_port(), data_dirs=[], log=LOG, route=ROUTE
-    )
-    try:
-        assert controller.wait_idle(240), "the sample did not load"
-        yield server, controller, app
-    finally:
-        app.close()
-        controller.close()
-        server.stop()
+def session():
+    with served(LOG, ROUTE) as running:
+        yield running
 
 
-def test_pin_change_and_step_the_changed_verdicts(browser, served, tmp_path):
-    server, controller, app = served
+def test_pin_change_and_step_the_changed_verdicts(browser, session, tmp_path):
+    server, controller, app = session
     page = browser.new_page(viewport={"width": 1400, "height": 900})
     page.set_default_timeout(90_000)
     try:
