@@ -8,12 +8,13 @@ import os
 import re
 import shutil
 import time
-from collections.abc import Callable, Iterator
+from collections.abc import Iterator
 from pathlib import Path
 
 import numpy as np
 import pytest
 from _browser import free_port
+from _browser import wait_until as _wait
 
 pytestmark = pytest.mark.e2e
 
@@ -64,16 +65,6 @@ def inspector(tmp_path_factory):
         app.close()
         controller.close()
         server.stop()
-
-
-def _wait(predicate, timeout: float = 30.0, what: str | Callable[[], str] = "condition"):
-    deadline = time.monotonic() + timeout
-    while time.monotonic() < deadline:
-        value = predicate()
-        if value:
-            return value
-        time.sleep(0.1)
-    raise AssertionError(f"timed out waiting for {what() if callable(what) else what}")
 
 
 def _open(browser, inspector, *, settle: bool = True, viewport: dict | None = None):

@@ -14,6 +14,7 @@ from pathlib import Path
 import numpy as np
 import pytest
 from _browser import free_port
+from _browser import wait_until as _wait
 
 pytestmark = pytest.mark.e2e
 
@@ -25,16 +26,6 @@ LOGS = {
     "comma2k19": (DATA / "comma2k19" / "i280.mcap", CONFIGS / "comma2k19_i280.toml"),
     "husky": (DATA / "robot_localization" / "test1.bag", CONFIGS / "husky_test1.toml"),
 }
-
-
-def _wait(predicate, timeout: float = 30.0, what: str = "condition"):
-    deadline = time.monotonic() + timeout
-    while time.monotonic() < deadline:
-        value = predicate()
-        if value:
-            return value
-        time.sleep(0.1)
-    raise AssertionError(f"timed out waiting for {what}")
 
 
 FRAME_RATE_JS = """() => new Promise(done => {

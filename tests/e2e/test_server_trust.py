@@ -13,6 +13,7 @@ import msgspec
 import pytest
 import viser
 from _browser import free_port
+from _browser import wait_until as _wait
 from viser import _messages
 from websockets.sync.client import connect
 
@@ -21,16 +22,6 @@ pytestmark = pytest.mark.e2e
 REPO = Path(__file__).resolve().parents[2]
 SAMPLE = REPO / "sample_logs" / "long_tunnel.mcap"
 UPLOAD_LIMIT = 1_000_000
-
-
-def _wait(predicate, timeout: float = 30.0, what: str = "condition"):
-    deadline = time.monotonic() + timeout
-    while time.monotonic() < deadline:
-        value = predicate()
-        if value:
-            return value
-        time.sleep(0.1)
-    raise AssertionError(f"timed out waiting for {what}")
 
 
 @pytest.fixture(scope="module")

@@ -67,10 +67,8 @@ def _ros1_record(fields: dict[str, bytes], data: bytes) -> bytes:
     return struct.pack("<I", len(header)) + header + struct.pack("<I", len(data)) + data
 
 
-def test_ros1_chunk_declaring_gigabytes_is_refused(tmp_path: Path) -> None:
-    import bz2
-
-    payload = bz2.compress(b"\0" * 10_000_000)
+def _ros1_bag(path: Path, chunk: bytes) -> Path:
+    """A ROS 1 bag of a bag header (one chunk, no connections) and ``chunk``."""
     head = _ros1_record(
         {
             "op": b"\x03",
@@ -80,11 +78,18 @@ def test_ros1_chunk_declaring_gigabytes_is_refused(tmp_path: Path) -> None:
         },
         b" " * 4000,
     )
+    path.write_bytes(b"#ROSBAG V2.0\n" + head + chunk)
+    return path
+
+
+def test_ros1_chunk_declaring_gigabytes_is_refused(tmp_path: Path) -> None:
+    import bz2
+
+    payload = bz2.compress(b"\0" * 10_000_000)
     chunk = _ros1_record(
         {"op": b"\x05", "compression": b"bz2", "size": struct.pack("<I", 4_000_000_000)}, payload
     )
-    path = tmp_path / "bomb.bag"
-    path.write_bytes(b"#ROSBAG V2.0\n" + head + chunk)
+    path = _ros1_bag(tmp_path / "bomb.bag", chunk)
     with pytest.raises(LogError, match="decompress") as err:
         describe_topics(path)
     assert str(path) in str(err.value)
@@ -102,21 +107,11 @@ def test_ros1_chunk_holding_more_than_it_declares_is_refused(
 
     zeros = b"\0" * 20_000_000
     payload = bz2.compress(zeros) if compression == "bz2" else lz4.frame.compress(zeros)
-    head = _ros1_record(
-        {
-            "op": b"\x03",
-            "index_pos": struct.pack("<Q", 0),
-            "conn_count": struct.pack("<I", 0),
-            "chunk_count": struct.pack("<I", 1),
-        },
-        b" " * 4000,
-    )
     chunk = _ros1_record(
         {"op": b"\x05", "compression": compression.encode(), "size": struct.pack("<I", 1000)},
         payload,
     )
-    path = tmp_path / "liar.bag"
-    path.write_bytes(b"#ROSBAG V2.0\n" + head + chunk)
+    path = _ros1_bag(tmp_path / "liar.bag", chunk)
     start = time.perf_counter()
     with pytest.raises(LogError, match="holds more than its declared 1000 bytes") as err:
         describe_topics(path)
