@@ -47,7 +47,8 @@ def compare_markdown(a: Session, b: Session) -> str:
     changed = changed_verdicts(a.proposed, b.proposed)
     return "\n".join(
         [
-            f"**A** (pinned) against **B** (on screen): {len(changed)} attempts changed verdict",
+            f"**A** (pinned, drawn in violet) against **B** (on screen): {len(changed)} attempts "
+            "changed verdict",
             "",
             *rows,
         ]

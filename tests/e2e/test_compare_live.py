@@ -1,11 +1,15 @@
 """Compare two parameter sets in the live inspector (issue 19): pin the run as A, change a
 parameter in the Parameters tab, and the Compare tab shows A, B and B - A, steps through the
 attempts whose verdict changed with both gate tables, and A is drawn beside B. In Chromium,
-clicking as a person does."""
+clicking as a person does. With ROUTEFUSE_UPDATE_SCREENSHOT=1 its screenshot replaces
+docs/inspector_compare.png (the README's)."""
 
 from __future__ import annotations
 
+import os
 import re
+import shutil
+import time
 from pathlib import Path
 
 import pytest
@@ -58,6 +62,13 @@ def test_pin_change_and_step_the_changed_verdicts(browser, session, tmp_path):
         assert "ACCEPTED" in text and "REJECTED" in text and "✗ FAILED" in text
         assert view.compare.pinned is not None
         assert view.client.scene._handle_from_node_name.get("/routefuse_pinned_a/track")
-        page.screenshot(path=str(tmp_path / "compare.png"))
+        close = page.locator(".mantine-Notification-closeButton")
+        for k in range(close.count()):
+            close.nth(k).dispatch_event("click")  # the "software WebGL" notice covers the map
+        time.sleep(1.5)
+        shot = tmp_path / "inspector_compare.png"
+        page.screenshot(path=str(shot))
+        if os.environ.get("ROUTEFUSE_UPDATE_SCREENSHOT") == "1":
+            shutil.move(shot, REPO / "docs" / "inspector_compare.png")
     finally:
         page.close()
