@@ -23,6 +23,8 @@ MAX_PLOT_POINTS = 1500
 
 BASELINE_COLOR = "#e8710a"
 PROPOSED_COLOR = "#1a73e8"
+PINNED_COLOR = "#963cc8"
+"""run A of a comparison (the Compare tab), as its trajectory on the map"""
 OUTAGE_FILL = "rgba(220, 50, 50, 0.15)"
 NOW_COLOR = "#d62728"
 
@@ -130,6 +132,26 @@ class DeviationPlot:
             "scales": {"x": {"time": False}, "band": {"auto": False, "range": (0.0, 1.0)}},
             "title": title,
         }
+
+
+def pinned_uplot(a: DeviationPlot, b: DeviationPlot, which: str, t_now: float) -> dict[str, Any]:
+    """The proposed run of A (pinned) against B's, on B's time grid, in the form of
+    :meth:`DeviationPlot.uplot`: the same plot with A in place of the baseline."""
+    kw = b.uplot(which, t_now)
+    xs = kw["data"][0]
+    y_a = {"position": a.position, "heading": a.heading, "truth": a.truth}[which]
+    assert y_a is not None
+    ya = np.interp(xs, a.t, np.nan_to_num(y_a[1]), left=np.nan, right=np.nan)
+    series = list(kw["series"])
+    unit = series[2]["label"].split("[")[1]
+    series[1] = {"label": f"A (pinned) [{unit}", "stroke": PINNED_COLOR, "width": 1.5}
+    series[2] = {**series[2], "label": f"B (on screen) [{unit}"}
+    return {
+        **kw,
+        "data": (xs, ya, *kw["data"][2:]),
+        "series": tuple(series),
+        "title": f"A against B: {kw['title']}",
+    }
 
 
 def _resample(t: F64, y: F64, grid: F64, *, angle: bool = False, gaps: bool = False) -> F64:

@@ -94,6 +94,7 @@ class ComparePanel:
         self._against = None
         self.unpin_button.visible = self.save_a.visible = True
         self._draw_pinned(s)
+        self.view.plots.show_pinned(s, s, self.view.playhead.t)
         self.show(s, self.view.playhead.t)
 
     def unpin(self) -> None:
@@ -101,6 +102,8 @@ class ComparePanel:
         self._changed = ()
         self.unpin_button.visible = self.save_a.visible = self.steps.visible = False
         self.view.client.scene.remove_by_name(ROOT)
+        if self.view.session is not None:
+            self.view.plots.show_pinned(None, self.view.session, self.view.playhead.t)
         self.summary.content = NOT_PINNED
         self.detail.content = ""
 

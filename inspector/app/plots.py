@@ -6,7 +6,7 @@ from __future__ import annotations
 import viser
 
 from inspector.controller import Session
-from inspector.plots import metrics_markdown
+from inspector.plots import metrics_markdown, pinned_uplot
 
 DEVIATION_KINDS = ("position", "heading", "truth")
 
@@ -19,6 +19,8 @@ class PlotsPanel:
         self.gui = gui
         self.tab = tab
         self.plots: dict[str, viser.GuiUplotHandle] = {}
+        self.pinned: Session | None = None
+        """run A of the Compare tab, overlaid on the proposed run's plots (None: nothing)"""
         self._plot_t: float | None = None
         with tab:
             self.metrics = gui.add_markdown("")
@@ -47,7 +49,33 @@ class PlotsPanel:
                 h.data = kw["data"]
                 h.visible = True
         self._show_off_route(session, t)
+        self.show_pinned(self.pinned, session, t)
         self._plot_t = None
+
+    def show_pinned(self, a: Session | None, b: Session, t: float) -> None:
+        """A's proposed run against B's on each deviation plot both have (hidden without A)."""
+        self.pinned = a
+        for k, which in enumerate(DEVIATION_KINDS):
+            key = f"pinned_{which}"
+            h = self.plots.get(key)
+            if a is None or which not in a.deviation.kinds or which not in b.deviation.kinds:
+                if h is not None:
+                    h.visible = False
+                continue
+            kw = pinned_uplot(a.deviation, b.deviation, which, t)
+            if h is None:
+                with self.tab:
+                    self.plots[key] = self.gui.add_uplot(
+                        kw["data"],
+                        kw["series"],
+                        scales=kw["scales"],
+                        title=kw["title"],
+                        aspect=1.6,
+                        order=self.metrics.order - 0.9 + 0.25 * k,
+                    )
+            else:
+                h.data = kw["data"]
+                h.visible = True
 
     def _show_off_route(self, session: Session, t: float) -> None:
         """The vehicle's distance from the route with the off-route spans shaded."""
@@ -77,7 +105,11 @@ class PlotsPanel:
             return
         self._plot_t = t
         for which, h in self.plots.items():
-            if which in s.deviation.kinds:
+            if which.startswith("pinned_"):
+                kind = which.removeprefix("pinned_")
+                if self.pinned is not None and h.visible:
+                    h.data = pinned_uplot(self.pinned.deviation, s.deviation, kind, t)["data"]
+            elif which in s.deviation.kinds:
                 h.data = s.deviation.uplot(which, t)["data"]
             elif which == "off_route" and s.off_route is not None:
                 h.data = s.off_route.uplot(t)["data"]

@@ -61,6 +61,16 @@ def test_pin_change_and_step_the_changed_verdicts(browser, session, tmp_path):
         assert "A (pinned)" in text and "B (on screen)" in text
         assert "ACCEPTED" in text and "REJECTED" in text and "✗ FAILED" in text
         assert view.compare.pinned is not None
+        # the Plots tab overlays A's proposed run on B's
+        page.get_by_role("tab", name="Plots").click()
+        _wait(
+            lambda: "A against B: position deviation from the route" in page.inner_text("body"),
+            20,
+            "the A-against-B plot",
+        )
+        assert "A (pinned)" in page.inner_text("body")
+        page.screenshot(path=str(tmp_path / "plots_a_against_b.png"))
+        page.get_by_role("tab", name="Compare").click()
         assert view.client.scene._handle_from_node_name.get("/routefuse_pinned_a/track")
         close = page.locator(".mantine-Notification-closeButton")
         for k in range(close.count()):
