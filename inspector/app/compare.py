@@ -37,6 +37,11 @@ def compare_markdown(a: Session, b: Session) -> str:
     """A, B and B - A of the proposed run's figures, and the count of changed verdicts."""
     if a.version == b.version:
         return "**A is pinned** and on screen: change a parameter to compare a new run with it."
+    if not same_drive(a, b):
+        return (
+            f"**A was pinned on {markdown_text(a.log_name)}**; "
+            f"{markdown_text(b.log_name)} is on screen: nothing to compare (unpin A)."
+        )
     rows = ["| quantity | A | B | B - A |", "|---|---:|---:|---:|"]
     for (label, _, va), (_, _, vb) in zip(a.metrics, b.metrics, strict=False):
         try:
@@ -53,6 +58,11 @@ def compare_markdown(a: Session, b: Session) -> str:
             *rows,
         ]
     )
+
+
+def same_drive(a: Session, b: Session) -> bool:
+    """Whether two sessions ran over the same log and route (else no attempt pairs up)."""
+    return (a.log_path, a.route_path) == (b.log_path, b.route_path)
 
 
 def changed_markdown(c: ChangedVerdict | None, n: int, k: int | None) -> str:
@@ -166,9 +176,8 @@ class ComparePanel:
             return
         if self._against != b.version:
             self._against = b.version
-            self._changed = (
-                () if a.version == b.version else changed_verdicts(a.proposed, b.proposed)
-            )
+            comparable = a.version != b.version and same_drive(a, b)
+            self._changed = changed_verdicts(a.proposed, b.proposed) if comparable else ()
             self.summary.content = compare_markdown(a, b)
             self.steps.visible = bool(self._changed)
         if not self._changed:

@@ -58,7 +58,13 @@ class PlotsPanel:
         for k, which in enumerate(DEVIATION_KINDS):
             key = f"pinned_{which}"
             h = self.plots.get(key)
-            if a is None or which not in a.deviation.kinds or which not in b.deviation.kinds:
+            other_drive = a is not None and (a.log_path, a.route_path) != (b.log_path, b.route_path)
+            if (
+                a is None
+                or other_drive
+                or which not in a.deviation.kinds
+                or which not in b.deviation.kinds
+            ):
                 if h is not None:
                     h.visible = False
                 continue

@@ -4,6 +4,7 @@ from __future__ import annotations
 
 import asyncio
 import threading
+from pathlib import Path
 from types import SimpleNamespace
 
 import numpy as np
@@ -86,3 +87,24 @@ def test_the_status_line_lists_the_logs_warnings_escaped_and_bounded():
     )
     line = status_markdown(session)  # type: ignore[arg-type]
     assert "1 warning about this log" in line and "km/h" in line
+
+
+def test_a_run_pinned_on_another_drive_is_not_compared():
+    from inspector.app.compare import compare_markdown, same_drive
+
+    def session(version, log):
+        return SimpleNamespace(
+            version=version,
+            log_path=Path(f"/data/{log}"),
+            route_path=Path("/data/r.geojson"),
+            log_name=log,
+            metrics=(("position deviation RMSE [m]", "1.0", "2.0"),),
+            proposed=SimpleNamespace(matches=(), t0=0.0),
+        )
+
+    a, b, other = session(1, "a.mcap"), session(2, "a.mcap"), session(3, "b.mcap")
+    assert same_drive(a, b) and not same_drive(a, other)
+    assert "nothing to compare" in compare_markdown(a, other)
+    text = compare_markdown(a, b)
+    assert "| position deviation RMSE \\[m\\] | 2.0 | 2.0 | +0.000 |" in text  # escaped
+    assert "0 attempts" in text
