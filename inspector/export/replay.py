@@ -328,7 +328,16 @@ def write_replay(
             anchor="top-center",
             font_screen_scale=1.2,
         )
+        gates = server.scene.add_label(
+            "/routefuse/export/gates",
+            "",
+            position=_gates_anchor(scene),
+            anchor="top-left",
+            font_screen_scale=0.9,
+        )
+        legend = legend_text()
         shown = -1
+        shown_gates = ""
         for i, t in enumerate(frames):
             n_done = int(np.searchsorted(scene.match_t, t + 1e-9, side="right"))
             if n_done != shown:
@@ -336,7 +345,11 @@ def write_replay(
                 shown = n_done
             layers.draw(float(t))
             state = "GNSS outage" if any(a <= t <= b for a, b in degraded) else "GNSS"
-            clock.text = f"t = {t - scene.t0:6.1f} s   {state}   attempts {n_done}"
+            clock.text = f"log time {t - scene.t0:6.1f} s   {state}   attempts {n_done}"
+            text = f"{attempt_text(scene, float(t))}\n\n{legend}"
+            if text != shown_gates:
+                gates.text = text
+                shown_gates = text
             if i + 1 < len(frames):
                 for rec in recorders:
                     rec.insert_sleep(float(frames[i + 1] - t) / time_lapse)
@@ -351,6 +364,45 @@ def write_replay(
     if progress is not None:
         progress(1.0)
     return html_path, viser_path
+
+
+def attempt_text(scene: SceneData, t: float) -> str:
+    """The gate table and fit values of the attempt on screen at log time ``t`` (the last one
+    within :data:`~inspector.layers.MATCH_MAX_AGE_S` before it), as the replay's label."""
+    from inspector.layers import MATCH_MAX_AGE_S
+
+    k = int(np.searchsorted(scene.match_t, t + 1e-9, side="right")) - 1
+    if k < 0 or t - scene.match_t[k] > MATCH_MAX_AGE_S:
+        return "no match attempt on screen"
+    m = scene.matches[k]
+    lines = [f"attempt #{m.index} at {m.t - scene.t0:.1f} s: {m.verdict}"]
+    for g in m.gates:
+        value = "no rival" if g.no_rival else f"{g.value:.3f}"
+        mark = "ok" if g.passed else "FAILED"
+        lines.append(f"  {g.name:<21} {value:>9} {g.comparison} {g.threshold:<8.3f} {mark}")
+    lines.append(
+        f"  rotation {np.degrees(m.rotation_rad):.2f} deg, residual {m.residual_m:.2f} m, "
+        f"pairs {m.n_pairs}, |z - p_dr| {float(np.hypot(*m.innovation)):.2f} m"
+    )
+    return "\n".join(lines)
+
+
+def legend_text() -> str:
+    """The map's colours in words, for a label (the layers' own legend)."""
+    from inspector.layers import COLOUR_NAMES, legend_entries
+
+    return "legend:\n" + "\n".join(
+        f"  {COLOUR_NAMES.get(rgb, f'rgb{rgb}')}: {meaning}" for rgb, meaning in legend_entries()
+    )
+
+
+def _gates_anchor(scene: SceneData) -> tuple[float, float, float]:
+    """Top left of the overview, beside the clock: the gate table and the legend."""
+    return (
+        float(scene.center[0] - 0.75 * scene.extent_m),
+        float(scene.center[1] + 0.55 * scene.extent_m),
+        1.0,
+    )
 
 
 def _first_attempts(scene: SceneData, n: int) -> SceneData:

@@ -360,3 +360,27 @@ def test_log_without_truth_as_ros1_bag(bag, tmp_path):
     assert "Error against ground truth" not in page
     lines = json.loads((result.out_dir / "trajectories.geojson").read_text())["features"]
     assert "truth" not in {f["properties"]["name"] for f in lines}
+
+
+def test_the_replay_shows_the_attempt_on_screen_with_its_gates_and_a_legend(exported):
+    """Issue 19: the replay explains itself: a label with the gate table and fit values of the
+    attempt on screen, changing with the replay's (log) time, and a legend in words."""
+    result, _ = exported
+    messages = _viser_payload(result.out_dir / "replay.viser")["messages"]
+    texts = [
+        m["updates"]["text"]
+        for _, m in messages
+        if m.get("name") == "/routefuse/export/gates" and "text" in m.get("updates", {})
+    ]
+    attempts = [t for t in texts if t.startswith("attempt #")]
+    assert len(attempts) >= 2 and len(set(attempts)) == len(attempts)  # it follows the time
+    first = attempts[0]
+    assert "min_pairs" in first and "residual" in first and "rotation" in first
+    assert any("no match attempt on screen" in t for t in texts)
+    assert all("legend:" in t and "grey: mission route" in t for t in texts)
+    clock = [
+        m["updates"]["text"]
+        for _, m in messages
+        if m.get("name") == "/routefuse/export/clock" and "text" in m.get("updates", {})
+    ]
+    assert all(c.startswith("log time") for c in clock)
