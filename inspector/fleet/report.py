@@ -29,8 +29,17 @@ RANKED = 10
 """regressions and improvements listed"""
 MAX_DELTA_ROWS = 500
 """logs in the per-log table (the worst first); the full table is results.parquet"""
-DELTA_METRIC = "rmse_pos_dev_m"
-"""what regressions are ranked by: the paper's position deviation RMSE over the outages"""
+TRUTH_METRIC = "rmse_h_err_m"
+ROUTE_METRIC = "rmse_pos_dev_m"
+
+
+def ranking_metric(rows: Sequence[Mapping[str, Any]]) -> str:
+    """What regressions are ranked by: the error against ground truth where the logs have it
+    (a route-relative deviation rewards following a wrong map), else the paper's position
+    deviation RMSE over the outages."""
+    return TRUTH_METRIC if any(_finite(r.get(TRUTH_METRIC)) for r in rows) else ROUTE_METRIC
+
+
 _COLUMNS = (
     "task_id", "log", "label", "route", "outages", "set", "set_index", "method", "status",
     "error", "export_dir", "total_s", "worker_peak_rss_mb", "matches_attempted",
@@ -79,6 +88,7 @@ def report_html(
     ok = [r for r in rows if r["status"] == "ok"]
     failed = [r for r in rows if r["status"] != "ok"]
     ref = plan.reference.name
+    metric = ranking_metric(ok)
     parts = [
         "<!DOCTYPE html>\n<html lang='en'><head><meta charset='utf-8'>",
         f"<title>routefuse sweep: {len(plan.logs)} logs x {len(plan.sets)} sets</title>",
@@ -88,23 +98,25 @@ def report_html(
         f"<b>{esc(ref)}</b>. Figures are those of each set's method over the GNSS-degraded "
         "intervals (<code>routefuse run</code>'s table); every figure of every task is in "
         "<code>results.parquet</code> / <code>results.csv</code>.</p>",
-        _sets_table(plan, rows, layout),
+        _sets_table(plan, rows, layout, metric),
         _distributions(plan, ok),
-        _ranked(plan, ok, layout, base),
-        _delta_table(plan, ok),
+        _ranked(plan, ok, layout, base, metric),
+        _delta_table(plan, ok, metric),
         _failures(failed),
         "</body></html>\n",
     ]
     return "\n".join(parts)
 
 
-def _sets_table(plan: SweepPlan, rows: Sequence[Mapping[str, Any]], layout: SweepLayout) -> str:
+def _sets_table(
+    plan: SweepPlan, rows: Sequence[Mapping[str, Any]], layout: SweepLayout, metric: str
+) -> str:
     esc = html.escape
     body = []
     for s in plan.sets:
         mine = [r for r in rows if r["set"] == s.name]
         good = [r for r in mine if r["status"] == "ok"]
-        med = _median([r.get(DELTA_METRIC) for r in good])
+        med = _median([r.get(metric) for r in good])
         cost = _median([r.get("total_s") for r in good])
         peak = max((r.get("worker_peak_rss_mb") or 0.0 for r in mine), default=0.0)
         config = layout.set_config(s.slug).relative_to(layout.out).as_posix()
@@ -118,7 +130,7 @@ def _sets_table(plan: SweepPlan, rows: Sequence[Mapping[str, Any]], layout: Swee
     return (
         "<h2>Parameter sets</h2><table><tr><th>set</th><th>method</th>"
         "<th>differs from the reference</th><th>parameters</th><th>ok</th>"
-        f"<th>median {esc(_TITLES[DELTA_METRIC])}</th><th>median task [s]</th>"
+        f"<th>median {esc(_TITLES[metric])}</th><th>median task [s]</th>"
         "<th>worker peak [MB]</th></tr>\n" + "\n".join(body) + "</table>"
     )
 
@@ -164,7 +176,7 @@ def _distributions(plan: SweepPlan, ok: Sequence[Mapping[str, Any]]) -> str:
     return "<h2>Distributions per set</h2>\n" + "\n".join(figures)
 
 
-def _deltas(plan: SweepPlan, ok: Sequence[Mapping[str, Any]]) -> list[dict[str, Any]]:
+def _deltas(plan: SweepPlan, ok: Sequence[Mapping[str, Any]], metric: str) -> list[dict[str, Any]]:
     """(task row, reference row, delta) for every non-reference task with both figures."""
     ref_name = plan.reference.name
     reference = {r["label"]: r for r in ok if r["set"] == ref_name}
@@ -173,31 +185,40 @@ def _deltas(plan: SweepPlan, ok: Sequence[Mapping[str, Any]]) -> list[dict[str, 
         if r["set"] == ref_name:
             continue
         base = reference.get(r["label"])
-        if base is None or not (_finite(r.get(DELTA_METRIC)) and _finite(base.get(DELTA_METRIC))):
+        if base is None or not (_finite(r.get(metric)) and _finite(base.get(metric))):
             continue
-        out.append({"row": r, "ref": base, "delta": r[DELTA_METRIC] - base[DELTA_METRIC]})
+        out.append({"row": r, "ref": base, "delta": r[metric] - base[metric]})
     return out
 
 
 def _ranked(
-    plan: SweepPlan, ok: Sequence[Mapping[str, Any]], layout: SweepLayout, base: Path
+    plan: SweepPlan,
+    ok: Sequence[Mapping[str, Any]],
+    layout: SweepLayout,
+    base: Path,
+    metric: str,
 ) -> str:
-    deltas = _deltas(plan, ok)
+    deltas = _deltas(plan, ok, metric)
     if len(plan.sets) < 2:
         return "<h2>Regressions</h2><p>One parameter set: nothing to compare.</p>"
     worst = sorted((d for d in deltas if d["delta"] > 0), key=lambda d: -d["delta"])[:RANKED]
     best = sorted((d for d in deltas if d["delta"] < 0), key=lambda d: d["delta"])[:RANKED]
-    return _ranked_table("Worst regressions", worst, plan, layout, base) + _ranked_table(
-        "Best improvements", best, plan, layout, base
+    return _ranked_table("Worst regressions", worst, plan, layout, base, metric) + _ranked_table(
+        "Best improvements", best, plan, layout, base, metric
     )
 
 
 def _ranked_table(
-    title: str, items: Sequence[Mapping[str, Any]], plan: SweepPlan, layout: SweepLayout, base: Path
+    title: str,
+    items: Sequence[Mapping[str, Any]],
+    plan: SweepPlan,
+    layout: SweepLayout,
+    base: Path,
+    metric: str,
 ) -> str:
     esc = html.escape
     head = (
-        f"<h2>{esc(title)}</h2><p>by {esc(_TITLES[DELTA_METRIC])}, the set against "
+        f"<h2>{esc(title)}</h2><p>by {esc(_TITLES[metric])}, the set against "
         f"<b>{esc(plan.reference.name)}</b> on the same log</p>"
     )
     if not items:
@@ -212,8 +233,8 @@ def _ranked_table(
         cls = "worse" if d["delta"] > 0 else "better"
         body.append(
             f"<tr><td>{esc(r['label'])}</td><td>{esc(r['set'])}</td>"
-            f"<td class='num'>{_num(ref[DELTA_METRIC])}</td>"
-            f"<td class='num'>{_num(r[DELTA_METRIC])}</td>"
+            f"<td class='num'>{_num(ref[metric])}</td>"
+            f"<td class='num'>{_num(r[metric])}</td>"
             f"<td class='num {cls}'>{d['delta']:+.3f}</td>"
             f"<td><code>{esc(command)}</code></td>"
             + (f"<td>{replay}</td>" if extra else "")
@@ -251,7 +272,7 @@ def serve_command(row: Mapping[str, Any], config: Path) -> str:
     return shlex.join(words)
 
 
-def _delta_table(plan: SweepPlan, ok: Sequence[Mapping[str, Any]]) -> str:
+def _delta_table(plan: SweepPlan, ok: Sequence[Mapping[str, Any]], metric: str) -> str:
     esc = html.escape
     others = [s.name for s in plan.sets[1:]]
     if not others:
@@ -259,7 +280,7 @@ def _delta_table(plan: SweepPlan, ok: Sequence[Mapping[str, Any]]) -> str:
     ref_name = plan.reference.name
     by_log: dict[str, dict[str, Any]] = {}
     for r in ok:
-        by_log.setdefault(r["label"], {})[r["set"]] = r.get(DELTA_METRIC)
+        by_log.setdefault(r["label"], {})[r["set"]] = r.get(metric)
     rows = []
     for label, values in by_log.items():
         ref = float(values[ref_name]) if _finite(values.get(ref_name)) else None
@@ -281,7 +302,7 @@ def _delta_table(plan: SweepPlan, ok: Sequence[Mapping[str, Any]]) -> str:
     )
     head = "".join(f"<th>{esc(_short(n))}</th>" for n in others)
     return (
-        f"<h2>Per log: change of {esc(_TITLES[DELTA_METRIC])} against "
+        f"<h2>Per log: change of {esc(_TITLES[metric])} against "
         f"{esc(ref_name)}</h2><table><tr><th>log</th><th>{esc(_short(ref_name))} [m]</th>"
         f"{head}</tr>\n" + "\n".join(body) + "</table>" + more
     )

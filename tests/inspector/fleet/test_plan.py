@@ -158,3 +158,13 @@ def _log(folder: Path) -> Path:
     log = folder / "drive.mcap"
     _touch(folder, "drive.mcap", "drive.route.geojson")
     return log
+
+
+def test_regressions_are_ranked_against_truth_where_the_logs_have_it():
+    """A route-relative deviation rewards following a wrong map: the report ranks by the error
+    against ground truth when any task has it, else by the route deviation."""
+    from inspector.fleet.report import ranking_metric
+
+    with_truth = [{"rmse_pos_dev_m": 0.3, "rmse_h_err_m": 2.0}, {"rmse_pos_dev_m": 0.4}]
+    assert ranking_metric(with_truth) == "rmse_h_err_m"
+    assert ranking_metric([{"rmse_pos_dev_m": 0.3, "rmse_h_err_m": None}]) == "rmse_pos_dev_m"
