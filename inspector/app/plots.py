@@ -3,6 +3,8 @@ distance from the route, each with a marker at the playhead."""
 
 from __future__ import annotations
 
+from typing import Any
+
 import viser
 
 from inspector.controller import Session
@@ -29,77 +31,51 @@ class PlotsPanel:
         self.metrics.content = metrics_markdown(session.metrics, session.method)
         dev = session.deviation
         for k, which in enumerate(DEVIATION_KINDS):
-            h = self.plots.get(which)
-            if which not in dev.kinds:
-                if h is not None:
-                    h.visible = False
-                continue
-            kw = dev.uplot(which, t)
-            if h is None:
-                with self.tab:
-                    self.plots[which] = self.gui.add_uplot(
-                        kw["data"],
-                        kw["series"],
-                        scales=kw["scales"],
-                        title=kw["title"],
-                        aspect=1.6,
-                        order=self.metrics.order - 1.0 + 0.25 * k,
-                    )
-            else:
-                h.data = kw["data"]
-                h.visible = True
-        self._show_off_route(session, t)
+            kw = dev.uplot(which, t) if which in dev.kinds else None
+            self._plot(which, kw, aspect=1.6, order=self.metrics.order - 1.0 + 0.25 * k)
+        off = session.off_route
+        self._plot(
+            "off_route",
+            None if off is None else off.uplot(t),
+            aspect=2.2,
+            order=self.metrics.order - 0.25,
+        )
         self.show_pinned(self.pinned, session, t)
         self._plot_t = None
 
     def show_pinned(self, a: Session | None, b: Session, t: float) -> None:
-        """A's proposed run against B's on each deviation plot both have (hidden without A)."""
+        """A's proposed run against B's on each deviation plot both have (hidden without A, or
+        when A ran over another log or route)."""
         self.pinned = a
         for k, which in enumerate(DEVIATION_KINDS):
-            key = f"pinned_{which}"
-            h = self.plots.get(key)
-            other_drive = a is not None and (a.log_path, a.route_path) != (b.log_path, b.route_path)
+            kw = None
             if (
-                a is None
-                or other_drive
-                or which not in a.deviation.kinds
-                or which not in b.deviation.kinds
+                a is not None
+                and (a.log_path, a.route_path) == (b.log_path, b.route_path)
+                and which in a.deviation.kinds
+                and which in b.deviation.kinds
             ):
-                if h is not None:
-                    h.visible = False
-                continue
-            kw = pinned_uplot(a.deviation, b.deviation, which, t)
-            if h is None:
-                with self.tab:
-                    self.plots[key] = self.gui.add_uplot(
-                        kw["data"],
-                        kw["series"],
-                        scales=kw["scales"],
-                        title=kw["title"],
-                        aspect=1.6,
-                        order=self.metrics.order - 0.9 + 0.25 * k,
-                    )
-            else:
-                h.data = kw["data"]
-                h.visible = True
+                kw = pinned_uplot(a.deviation, b.deviation, which, t)
+            order = self.metrics.order - 0.9 + 0.25 * k
+            self._plot(f"pinned_{which}", kw, aspect=1.6, order=order)
 
-    def _show_off_route(self, session: Session, t: float) -> None:
-        """The vehicle's distance from the route with the off-route spans shaded."""
-        h = self.plots.get("off_route")
-        if session.off_route is None:
+    def _plot(self, key: str, kw: dict[str, Any] | None, *, aspect: float, order: float) -> None:
+        """Show the plot ``key`` with ``kw`` (``add_uplot``'s arguments): added the first time,
+        its data replaced afterwards, hidden (not removed) when ``kw`` is None."""
+        h = self.plots.get(key)
+        if kw is None:
             if h is not None:
                 h.visible = False
             return
-        kw = session.off_route.uplot(t)
         if h is None:
             with self.tab:
-                self.plots["off_route"] = self.gui.add_uplot(
+                self.plots[key] = self.gui.add_uplot(
                     kw["data"],
                     kw["series"],
                     scales=kw["scales"],
                     title=kw["title"],
-                    aspect=2.2,
-                    order=self.metrics.order - 0.25,
+                    aspect=aspect,
+                    order=order,
                 )
         else:
             h.data = kw["data"]
