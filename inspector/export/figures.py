@@ -9,7 +9,9 @@ deviation panel) and :class:`SceneData` (its map), so a figure and the UI never 
 
 from __future__ import annotations
 
+import io
 from collections.abc import Sequence
+from dataclasses import dataclass
 from pathlib import Path
 from typing import Any
 
@@ -37,10 +39,10 @@ _SVG_META = {"Date": None}
 
 
 def write_figures(
-    out: Path, inputs: Any, baseline: Run, compared: Run, scene: SceneData
+    out: Path, plot: DeviationPlot, scene: SceneData, compared: Run
 ) -> tuple[Path, ...]:
     """``deviation.png``, ``deviation.svg`` and ``trajectory.png``."""
-    dev = deviation_figure(DeviationPlot.build(inputs, baseline, compared), compared.method)
+    dev = deviation_figure(plot, compared.method)
     paths = (out / "deviation.png", out / "deviation.svg", out / "trajectory.png")
     dev.savefig(paths[0], dpi=DPI)
     dev.savefig(paths[1], metadata=_SVG_META)
@@ -79,6 +81,64 @@ def deviation_figure(plot: DeviationPlot, method: str = "proposed") -> Figure:
     ax_pos.legend(loc="upper left", fontsize="small")
     ax_pos.set_title("Deviation from the route: baseline vs " + method)
     return fig
+
+
+@dataclass(frozen=True)
+class TimeStrip:
+    """A small plot against log time as a PNG, with where its time axis lies in the image, so a
+    page can draw a cursor over it and turn a click into a time."""
+
+    png: bytes
+    width_px: int
+    height_px: int
+    x_left_px: float
+    """image column of ``t_lo`` (the axes' left edge)"""
+    x_right_px: float
+    """image column of ``t_hi``"""
+    t_lo: float
+    t_hi: float
+
+
+def replay_strip(
+    plot: DeviationPlot, refused_t: F64, method: str = "proposed", *, width_in: float = 4.6
+) -> TimeStrip:
+    """The error against truth (when the log has it) and the route deviation of both runs
+    against time since the log start, outages shaded, refused attempts ticked: the replay page's
+    deviation plot. The route deviation is never shown alone where truth exists (it rewards
+    following a wrong map)."""
+    panels = [("route deviation [m]", plot.position)]
+    if plot.truth is not None:
+        panels.insert(0, ("error vs truth [m]", plot.truth))
+    fig = Figure(figsize=(width_in, 1.0 + 1.15 * len(panels)), dpi=100, layout="constrained")
+    axes = fig.subplots(len(panels), 1, sharex=True, squeeze=False)[:, 0]
+    for ax, (label, (base, comp)) in zip(axes, panels, strict=True):
+        _shade(ax, plot.outages)
+        ax.plot(plot.t, base, color=BASELINE_COLOR, lw=1.0, label="baseline")
+        ax.plot(plot.t, comp, color=PROPOSED_COLOR, lw=1.0, label=method)
+        ax.set_ylabel(label, fontsize="small")
+        ax.set_ylim(bottom=0.0)
+        ax.tick_params(labelsize="x-small")
+        ax.grid(alpha=0.3)
+        for t in refused_t:
+            ax.axvline(float(t), color=REJECTED_COLOR, lw=0.6, alpha=0.6)
+    axes[0].legend(loc="upper left", fontsize="x-small", ncols=3)
+    axes[-1].set_xlabel("log time [s]", fontsize="small")
+    t_lo, t_hi = (float(plot.t[0]), float(plot.t[-1])) if len(plot.t) > 1 else (0.0, 1.0)
+    axes[-1].set_xlim(t_lo, t_hi)
+    fig.draw_without_rendering()
+    box = axes[-1].get_window_extent()
+    buf = io.BytesIO()
+    fig.savefig(buf, format="png", dpi=fig.dpi)
+    width, height = round(fig.bbox.width), round(fig.bbox.height)
+    return TimeStrip(
+        png=buf.getvalue(),
+        width_px=int(width),
+        height_px=int(height),
+        x_left_px=float(box.x0),
+        x_right_px=float(box.x1),
+        t_lo=t_lo,
+        t_hi=t_hi,
+    )
 
 
 def _zoom_box(

@@ -12,6 +12,7 @@ host the scene API the layers draw into; no browser ever connects to it.
 
 from __future__ import annotations
 
+import base64
 import contextlib
 import dataclasses
 import io
@@ -20,6 +21,7 @@ import socket
 import time
 from collections.abc import Callable, Iterator, Sequence
 from dataclasses import dataclass, field
+from importlib import resources
 from pathlib import Path
 from typing import Any
 
@@ -32,6 +34,7 @@ from estimator.params import Method, Params
 from estimator.results import Run
 from inspector.export import figures as export_figures
 from inspector.export import tables as export_tables
+from inspector.plots import DeviationPlot
 from inspector.scene_data import SceneData
 
 F64 = NDArray[np.float64]
@@ -198,15 +201,19 @@ def _write_files(
     scene = SceneData.build(
         baseline=baseline, proposed=compared, route=inputs.route, log=inputs.log
     )
-    files += export_figures.write_figures(out, inputs, baseline, compared, scene)
+    plot = DeviationPlot.build(inputs, baseline, compared)
+    files += export_figures.write_figures(out, plot, scene, compared)
     steps.lap("figures_s")
     frames = replay_times(scene, replay)
     files += write_replay(
         out,
         scene,
         frames,
+        plot=plot,
         degraded=compared.degraded_intervals,
         time_lapse=_time_lapse(frames, replay),
+        title=f"{Path(doc['log']).name} on {Path(doc['route']).name}",
+        method=compared.method,
         progress=steps.stage("replay", 0.75, 0.98),
     )
     steps.lap("replay_s")
@@ -297,15 +304,22 @@ def write_replay(
     scene: SceneData,
     frames: F64,
     *,
+    plot: DeviationPlot,
     degraded: Sequence[tuple[float, float]] = (),
     time_lapse: float = 1.0,
+    title: str = "routefuse replay",
+    method: str = "proposed",
     progress: Callable[[float], None] | None = None,
 ) -> tuple[Path, ...]:
     """Draw ``scene`` at each frame time with the inspector's layers under viser's scene
-    serializer; write ``replay.html`` (self-contained, plays from file://) and
-    ``replay.viser`` (for viser's own player). The verdict markers appear as their attempts
-    happen; a label gives the log time and whether GNSS is out (inside ``degraded``, absolute
-    (start, end) times)."""
+    serializer; write ``replay.html`` (self-contained, plays from file://: the scene beside a
+    panel with the clock, the deviation plot, the gate table of the attempt on screen and the
+    legend, all in log time) and ``replay.viser`` (the scene alone, for viser's own player).
+
+    The recording's time is the log's time since its start, so every clock (the panel's,
+    viser's and the scene's label) reads the same; ``time_lapse`` is the page's initial
+    playback speed. The verdict markers appear as their attempts happen. ``degraded``:
+    absolute (start, end) times where GNSS is out."""
     from inspector.layers import SceneLayers, TrackLayer
 
     html_path, viser_path = out_dir / "replay.html", out_dir / "replay.viser"
@@ -328,17 +342,12 @@ def write_replay(
             anchor="top-center",
             font_screen_scale=1.2,
         )
-        gates = server.scene.add_label(
-            "/routefuse/export/gates",
-            "",
-            position=_gates_anchor(scene),
-            anchor="top-left",
-            font_screen_scale=0.9,
-        )
-        legend = legend_text()
+        recorded_until = scene.t0
         shown = -1
-        shown_gates = ""
         for i, t in enumerate(frames):
+            for rec in recorders:
+                rec.insert_sleep(max(float(t) - recorded_until, 0.0))
+            recorded_until = float(t)
             n_done = int(np.searchsorted(scene.match_t, t + 1e-9, side="right"))
             if n_done != shown:
                 verdicts.set_data(_first_attempts(scene, n_done))
@@ -346,63 +355,124 @@ def write_replay(
             layers.draw(float(t))
             state = "GNSS outage" if any(a <= t <= b for a, b in degraded) else "GNSS"
             clock.text = f"log time {t - scene.t0:6.1f} s   {state}   attempts {n_done}"
-            text = f"{attempt_text(scene, float(t))}\n\n{legend}"
-            if text != shown_gates:
-                gates.text = text
-                shown_gates = text
-            if i + 1 < len(frames):
-                for rec in recorders:
-                    rec.insert_sleep(float(frames[i + 1] - t) / time_lapse)
             if progress is not None and i % 20 == 0:
                 progress(i / len(frames))
         for rec in recorders:
             rec.insert_sleep(1.0)  # hold the last frame a moment before the player loops
         html = recorders[0].as_html()
         data = recorders[1].serialize()
-    html_path.write_text(html, encoding="utf-8")
+    panel = replay_panel(
+        scene,
+        plot,
+        degraded=degraded,
+        duration=recorded_until - scene.t0,
+        speed=time_lapse,
+        title=title,
+        method=method,
+    )
+    body_end = html.rindex("</body>")
+    html_path.write_text(html[:body_end] + panel + html[body_end:], encoding="utf-8")
     viser_path.write_bytes(data)
     if progress is not None:
         progress(1.0)
     return html_path, viser_path
 
 
-def attempt_text(scene: SceneData, t: float) -> str:
-    """The gate table and fit values of the attempt on screen at log time ``t`` (the last one
-    within :data:`~inspector.layers.MATCH_MAX_AGE_S` before it), as the replay's label."""
-    from inspector.layers import MATCH_MAX_AGE_S
+PLAYBACK_SPEEDS = (1.0, 2.0, 5.0, 10.0, 20.0, 50.0, 100.0, 200.0)
+"""log seconds per second the replay page offers (with the export's own time lapse)"""
 
-    k = int(np.searchsorted(scene.match_t, t + 1e-9, side="right")) - 1
-    if k < 0 or t - scene.match_t[k] > MATCH_MAX_AGE_S:
-        return "no match attempt on screen"
-    m = scene.matches[k]
-    lines = [f"attempt #{m.index} at {m.t - scene.t0:.1f} s: {m.verdict}"]
-    for g in m.gates:
-        value = "no rival" if g.no_rival else f"{g.value:.3f}"
-        mark = "ok" if g.passed else "FAILED"
-        lines.append(f"  {g.name:<21} {value:>9} {g.comparison} {g.threshold:<8.3f} {mark}")
-    lines.append(
-        f"  rotation {np.degrees(m.rotation_rad):.2f} deg, residual {m.residual_m:.2f} m, "
-        f"pairs {m.n_pairs}, |z - p_dr| {float(np.hypot(*m.innovation)):.2f} m"
+
+def replay_panel(
+    scene: SceneData,
+    plot: DeviationPlot,
+    *,
+    degraded: Sequence[tuple[float, float]],
+    duration: float,
+    speed: float,
+    title: str,
+    method: str,
+) -> str:
+    """The replay page's panel as HTML to append to viser's page: rendered by Jinja2 with
+    autoescaping, its data as JSON in a script element (Jinja2's ``tojson``, safe inside HTML),
+    its behaviour in ``templates/replay_panel.js``."""
+    import jinja2
+    from markupsafe import Markup
+
+    from inspector.layers import MATCH_MAX_AGE_S, legend_entries
+
+    refused_t = np.array([m.t - scene.t0 for m in scene.matches if not m.accepted])
+    strip = export_figures.replay_strip(plot, refused_t, method)
+    data = {
+        "duration": round(duration, 4),
+        "speed": speed,
+        "autoplay": True,
+        "max_age_s": MATCH_MAX_AGE_S,
+        "outages": [[a - scene.t0, b - scene.t0] for a, b in degraded],
+        "attempts": [_attempt_json(scene, m) for m in scene.matches],
+        "strip": {
+            "width_px": strip.width_px,
+            "x_left_px": strip.x_left_px,
+            "x_right_px": strip.x_right_px,
+            "t_lo": strip.t_lo,
+            "t_hi": strip.t_hi,
+        },
+    }
+    env = jinja2.Environment(
+        loader=jinja2.PackageLoader("inspector.export", "templates"),
+        autoescape=True,
+        undefined=jinja2.StrictUndefined,
     )
-    return "\n".join(lines)
-
-
-def legend_text() -> str:
-    """The map's colours in words, for a label (the layers' own legend)."""
-    from inspector.layers import COLOUR_NAMES, legend_entries
-
-    return "legend:\n" + "\n".join(
-        f"  {COLOUR_NAMES.get(rgb, f'rgb{rgb}')}: {meaning}" for rgb, meaning in legend_entries()
+    script = (resources.files("inspector.export") / "templates" / "replay_panel.js").read_text()
+    return env.get_template("replay_panel.html").render(
+        title=title,
+        speeds=[f"{s:g}" for s in sorted({*PLAYBACK_SPEEDS, speed})],
+        speed=f"{speed:g}",
+        duration=f"{duration:.1f}",
+        strip_png=base64.b64encode(strip.png).decode("ascii"),
+        strip_width=strip.width_px,
+        strip_height=strip.height_px,
+        legend=legend_entries(),
+        measure=_measure_note(plot),
+        data=data,
+        script=Markup(script),
     )
 
 
-def _gates_anchor(scene: SceneData) -> tuple[float, float, float]:
-    """Top left of the overview, beside the clock: the gate table and the legend."""
-    return (
-        float(scene.center[0] - 0.75 * scene.extent_m),
-        float(scene.center[1] + 0.55 * scene.extent_m),
-        1.0,
-    )
+def _measure_note(plot: DeviationPlot) -> str:
+    if plot.truth is None:
+        return "This log has no ground truth: the plot shows the deviation from the route only."
+    return "The error against truth is the measure; the route deviation rewards following a map."
+
+
+def _finite(x: float) -> float | None:
+    """JSON has no NaN: a gate that never computed its value is null."""
+    return float(x) if math.isfinite(x) else None
+
+
+def _attempt_json(scene: SceneData, m: Any) -> dict[str, Any]:
+    """One attempt as the replay page shows it: its time (log seconds), verdict, gate table and
+    fit values."""
+    return {
+        "index": int(m.index),
+        "t": round(float(m.t - scene.t0), 4),
+        "accepted": bool(m.accepted),
+        "verdict": str(m.verdict),
+        "gates": [
+            {
+                "name": g.name,
+                "value": _finite(g.value),
+                "comparison": g.comparison,
+                "threshold": _finite(g.threshold),
+                "passed": bool(g.passed),
+                "no_rival": bool(g.no_rival),
+            }
+            for g in m.gates
+        ],
+        "fit": (
+            f"rotation {np.degrees(m.rotation_rad):.2f} deg, residual {m.residual_m:.2f} m, "
+            f"pairs {m.n_pairs}, |z - p_dr| {float(np.hypot(*m.innovation)):.2f} m"
+        ),
+    }
 
 
 def _first_attempts(scene: SceneData, n: int) -> SceneData:

@@ -362,25 +362,59 @@ def test_log_without_truth_as_ros1_bag(bag, tmp_path):
     assert "truth" not in {f["properties"]["name"] for f in lines}
 
 
-def test_the_replay_shows_the_attempt_on_screen_with_its_gates_and_a_legend(exported):
-    """Issue 19: the replay explains itself: a label with the gate table and fit values of the
-    attempt on screen, changing with the replay's (log) time, and a legend in words."""
+def _panel_data(page: str) -> dict:
+    found = re.search(
+        r'<script type="application/json" id="routefuse-replay-data">(.*?)</script>', page, re.S
+    )
+    assert found, "no panel data in the page"
+    return json.loads(found.group(1))
+
+
+def test_the_replay_page_explains_every_attempt_in_log_time(exported):
+    """Issue 19: the replay page carries every attempt's gate table and fit values (the page's
+    panel shows the one on screen), the legend, and one clock: the recording's time is the
+    log's time since its start, as the scene's clock label says."""
+    from inspector.layers import legend_entries
+
     result, _ = exported
+    page = (result.out_dir / "replay.html").read_text()
+    data = _panel_data(page)
+    with (result.out_dir / "matches.csv").open(newline="") as f:
+        rows = list(csv.DictReader(f))
+    assert len(rows) >= 2
+    assert [a["index"] for a in data["attempts"]] == [int(r["index"]) for r in rows]
+    assert [a["t"] for a in data["attempts"]] == pytest.approx([float(r["t_s"]) for r in rows])
+    assert [a["accepted"] for a in data["attempts"]] == [r["accepted"] == "1" for r in rows]
+    for a in data["attempts"]:
+        assert [g["name"] for g in a["gates"]][:3] == ["min_pairs", "heading", "residual"]
+        assert a["fit"].startswith("rotation ")
     messages = _viser_payload(result.out_dir / "replay.viser")["messages"]
-    texts = [
-        m["updates"]["text"]
-        for _, m in messages
-        if m.get("name") == "/routefuse/export/gates" and "text" in m.get("updates", {})
-    ]
-    attempts = [t for t in texts if t.startswith("attempt #")]
-    assert len(attempts) >= 2 and len(set(attempts)) == len(attempts)  # it follows the time
-    first = attempts[0]
-    assert "min_pairs" in first and "residual" in first and "rotation" in first
-    assert any("no match attempt on screen" in t for t in texts)
-    assert all("legend:" in t and "grey: mission route" in t for t in texts)
     clock = [
-        m["updates"]["text"]
-        for _, m in messages
+        (t, m["updates"]["text"])
+        for t, m in messages
         if m.get("name") == "/routefuse/export/clock" and "text" in m.get("updates", {})
     ]
-    assert all(c.startswith("log time") for c in clock)
+    assert len(clock) > 10
+    for t, text in clock:
+        assert float(text.split()[2]) == pytest.approx(t, abs=0.06)
+    assert data["duration"] == pytest.approx(clock[-1][0], abs=0.06)
+    for _, meaning in legend_entries():
+        assert html.escape(meaning) in page
+
+
+def test_the_replay_panel_escapes_what_it_shows():
+    """A hostile file name in the title is shown as text; the panel data stays one JSON value."""
+    from inspector.export.replay import replay_panel
+    from inspector.plots import DeviationPlot
+
+    scene = _scene(n_matches=4)
+    t = np.linspace(0.0, 10.0, 50)
+    plot = DeviationPlot(t=t, position=(t, t), heading=(t, t), outages=((2.0, 6.0),))
+    hostile = '<img src=x onerror="alert(1)">.mcap on </script><script>alert(2)</script>'
+    panel = replay_panel(
+        scene, plot, degraded=(), duration=10.0, speed=2.0, title=hostile, method="proposed"
+    )
+    assert "<img src=x" not in panel and "<script>alert(2)" not in panel
+    assert "&lt;img src=x onerror=" in panel
+    assert len(_panel_data(panel)["attempts"]) == 4
+    assert "no ground truth" in panel
