@@ -12,7 +12,14 @@ from numpy.typing import NDArray
 from estimator.errors import LogError
 from estimator.filter.kernel import run_until, write_row
 from estimator.filter.layout import (
+    A_DIST,
+    A_INFLATE,
+    A_REJECT_SINCE,
     A_TIME,
+    A_TRUST_T,
+    A_USED_DIST,
+    E_ATT,
+    E_POS,
     I_IMU,
     I_OUT,
     NO,
@@ -25,8 +32,12 @@ from estimator.filter.layout import (
     O_VEL,
     STATUS_DIVERGED,
     STATUS_FULL,
+    X_POS,
+    X_QUAT,
+    X_VEL,
 )
-from estimator.filter.setup import FilterInputs
+from estimator.filter.propagation import flush_covariance
+from estimator.filter.setup import FilterInputs, Realignment
 from estimator.results import Epochs
 
 F64 = NDArray[np.float64]
@@ -113,6 +124,9 @@ class Filter:
                 k = int(self.idx[I_IMU])
                 t_next = float(inp.imu_t[k]) if k < len(inp.imu_t) else t_now
                 target = min(t_stop, max(t_now, t_next) + CHUNK_S)
+            realign = next((r for r in inp.realignments if t_now < r.t <= target), None)
+            if realign is not None:
+                target = realign.t
             status = run_until(
                 target,
                 self.x,
@@ -140,11 +154,31 @@ class Filter:
                     "the filter diverged (non-finite state) at "
                     f"t = {self.aux[A_TIME] - self.t_start:.2f} s",
                 )
+            if realign is not None and self.aux[A_TIME] >= realign.t:
+                self._realign(realign)
             if self.progress is not None:
                 span = max(t_end - t_first, 1e-9)
                 self.progress(min(1.0, (self.aux[A_TIME] - t_first) / span))
             if target >= t_stop or self.idx[I_IMU] >= len(inp.imu_t):
                 return
+
+
+    def _realign(self, r: Realignment) -> None:
+        """Replace the navigation state carried across an IMU gap by the fresh alignment after
+        it: attitude, velocity and position with their covariance, uncorrelated with the rest
+        (the biases and the GNSS wander go on); fixes right after it are trusted."""
+        flush_covariance(self.P, self.aux, self.inp.cfg)
+        nav = slice(E_ATT, E_POS + 3)
+        self.x[X_POS : X_POS + 3] = r.x[X_POS : X_POS + 3]
+        self.x[X_VEL : X_VEL + 3] = r.x[X_VEL : X_VEL + 3]
+        self.x[X_QUAT : X_QUAT + 4] = r.x[X_QUAT : X_QUAT + 4]
+        self.P[nav, :] = 0.0
+        self.P[:, nav] = 0.0
+        self.P[nav, nav] = r.P[nav, nav]
+        self.aux[A_REJECT_SINCE] = -1.0
+        self.aux[A_INFLATE] = 0.0
+        self.aux[A_TRUST_T] = r.t
+        self.aux[A_USED_DIST] = self.aux[A_DIST]
 
 
 def epochs_of(out: F64, n: int, degraded: tuple[tuple[float, float], ...]) -> Epochs:

@@ -67,6 +67,22 @@ F64 = NDArray[np.float64]
 Outages = tuple[tuple[float, float], ...]
 
 
+REALIGN_WITHIN_S = 30.0
+"""After an IMU gap the filter is aligned afresh when the GNSS track gives a chord this soon
+after the gap's end; later, the fixes' own corrections are left to bring the heading back."""
+
+
+@dataclass(frozen=True)
+class Realignment:
+    """A fresh alignment after an IMU gap: the navigation state (attitude, velocity, position)
+    and its covariance at the IMU sample at ``t``, which replace the state carried across the
+    gap (whose heading the gap left unknown); the sensor biases are kept."""
+
+    t: float
+    x: F64
+    P: F64
+
+
 @dataclass(frozen=True)
 class FilterInputs:
     """What the kernel reads: sensor arrays on the IMU clock, in the body frame and the local
@@ -89,6 +105,8 @@ class FilterInputs:
     idx0: NDArray[np.int64]
     degraded: tuple[tuple[float, float], ...]
     warnings: tuple[str, ...]
+    realignments: tuple[Realignment, ...] = ()
+    """after each IMU gap the GNSS track could align, in time order"""
 
 
 def prepare_inputs(log: Log, p: Params, frame: LocalFrame, outages: Outages) -> FilterInputs:
@@ -119,6 +137,10 @@ def prepare_inputs(log: Log, p: Params, frame: LocalFrame, outages: Outages) -> 
         src, imu_t, gyro, accel, still, wheel_t, wheel_v, gnss_t, gnss_pos, gnss_var, p, cfg
     )
     warnings.extend(notes)
+    realignments = _realignments(
+        src, imu_t, gyro, accel, still, wheel_t, wheel_v, gnss_t, gnss_pos, gnss_var, p, cfg
+    )
+    warnings.extend(_realignment_notes(imu_t, realignments, log.t_start))
     # the aligning fix measures position + wander: their errors start anti-correlated
     for i in range(3):
         a, b = E_POS + i, E_GW + i
@@ -148,7 +170,77 @@ def prepare_inputs(log: Log, p: Params, frame: LocalFrame, outages: Outages) -> 
         idx0=idx0,
         degraded=degraded,
         warnings=tuple(warnings),
+        realignments=realignments,
     )
+
+
+def _realignments(
+    src: str,
+    imu_t: F64,
+    gyro: F64,
+    accel: F64,
+    still: NDArray[np.bool_],
+    wheel_t: F64,
+    wheel_v: F64,
+    gnss_t: F64,
+    gnss_pos: F64,
+    gnss_var: F64,
+    p: Params,
+    cfg: F64,
+) -> tuple[Realignment, ...]:
+    """An alignment after every IMU gap from the first :data:`REALIGN_WITHIN_S` of the data
+    after it, the same way the run's start is aligned (several fixes, motion consistency).
+    Across a gap the wheels carry the position, but where the road turned in it nothing
+    measured the heading: fixes then pull the position back while a heading tens of degrees
+    off drags it away again, for minutes. None where the track after the gap cannot align (a
+    gap in a tunnel: the bridged state goes on) or where the heading is configured."""
+    if p.sensors.initial_heading_deg is not None:
+        return ()
+    found = []
+    for g in np.flatnonzero(np.diff(imu_t) > IMU_GAP_S):
+        k1 = int(g) + 1
+        b = float(imu_t[k1])
+        fixes = (gnss_t >= b) & (gnss_t <= b + REALIGN_WITHIN_S)
+        if fixes.sum() < 2:
+            continue
+        try:
+            x, P, k, _t_fix, _notes = align(
+                src,
+                imu_t[k1:],
+                gyro[k1:],
+                accel[k1:],
+                still[k1:],
+                wheel_t,
+                wheel_v,
+                gnss_t[fixes],
+                gnss_pos[fixes],
+                gnss_var[fixes],
+                p,
+                cfg,
+            )
+        except LogError:
+            continue
+        found.append(Realignment(t=float(imu_t[k1 + k]), x=x, P=P))
+    return tuple(found)
+
+
+def _realignment_notes(
+    imu_t: F64, realignments: tuple[Realignment, ...], t_start: float
+) -> list[str]:
+    """One line per IMU gap: re-aligned, or carried with its heading unknown."""
+    notes = []
+    for g in np.flatnonzero(np.diff(imu_t) > IMU_GAP_S):
+        a, b = float(imu_t[g]), float(imu_t[g + 1])
+        after = [r.t for r in realignments if b <= r.t <= b + REALIGN_WITHIN_S]
+        span = f"IMU gap {a - t_start:.1f}-{b - t_start:.1f} s"
+        if after:
+            notes.append(f"{span}: re-aligned from the GNSS track at {after[0] - t_start:.1f} s")
+        else:
+            notes.append(
+                f"{span}: no GNSS track to re-align from within {REALIGN_WITHIN_S:g} s after it; "
+                "the heading carried across it is uncertain"
+            )
+    return notes
 
 
 def _outside_imu_gaps(
