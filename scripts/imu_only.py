@@ -166,23 +166,26 @@ def table(rows: list[dict[str, Any]]) -> str:
     """The markdown summary and table of the cases."""
     ok = [r for r in rows if not r["error"]]
     lines = []
-    for kind, name in (("comma", "comma2k19 I-280 placements"), ("sim", "simulated IMU-only"),
-                       ("stress", "stress corpus, no odometer")):
+    for kind, name in (
+        ("comma", "comma2k19 I-280 placements"),
+        ("sim", "simulated IMU-only"),
+        ("stress", "stress corpus, no odometer"),
+    ):
         group = [r for r in ok if r["kind"] == kind]
         if not group:
             continue
         better = sum(r["routefuse_le_baseline"] for r in group)
-        before = sum(
-            r["no_caution_truth_rmse_m"] <= r["baseline_truth_rmse_m"] for r in group
-        )
+        before = sum(r["no_caution_truth_rmse_m"] <= r["baseline_truth_rmse_m"] for r in group)
         lines.append(
             f"- {name}: routefuse <= baseline on **{better} of {len(group)}** "
             f"(with `no_wheel_caution` off: {before} of {len(group)})"
         )
     failed = [r for r in rows if r["error"]]
     if failed:
-        lines.append(f"- {len(failed)} cases failed: " + "; ".join(
-            f"{r['kind']} {r['case']}: {r['error']}" for r in failed))
+        lines.append(
+            f"- {len(failed)} cases failed: "
+            + "; ".join(f"{r['kind']} {r['case']}: {r['error']}" for r in failed)
+        )
     lines += [
         "",
         "| case | outage | faults | baseline [m] | routefuse [m] | <= baseline | "

@@ -205,9 +205,7 @@ def match_geometry(
         fit=fit,
         route_s=(s0, s1),
         route_segment=road.segment(s0, s1),
-        scores=_scores(
-            win, p, cov, road, s_anchor, lane, lane_path, fit, params, settings, search
-        ),
+        scores=_scores(win, p, cov, road, s_anchor, lane, lane_path, fit, params, settings, search),
     )
 
 
