@@ -17,12 +17,15 @@ WHEEL_TYPES = (ODOM_TYPE, TWIST_TYPE)
 
 @dataclass(frozen=True)
 class TopicChoice:
-    """Topics picked by the user; ``None`` lets the loader find the topic by its type."""
+    """Topics picked by the user; ``None`` lets the loader find the topic by its type.
+    ``no_wheel`` leaves the wheel speed out even when the log has it: an IMU-only run of a log
+    recorded with an odometer (issue 17's IMU-only cases) reads the same file as the full one."""
 
     imu: str | None = None
     gnss: str | None = None
     wheel: str | None = None
     truth: str | None = None
+    no_wheel: bool = False
 
     @classmethod
     def from_args(cls, args: Any) -> TopicChoice:
@@ -32,6 +35,7 @@ class TopicChoice:
             gnss=getattr(args, "gnss_topic", None),
             wheel=getattr(args, "wheel_topic", None),
             truth=getattr(args, "truth_topic", None),
+            no_wheel=bool(getattr(args, "no_wheel", False)),
         )
 
 
@@ -107,6 +111,8 @@ def _pick(
 
 def topic_roles(path: Path, types: dict[str, str], choice: TopicChoice) -> TopicRoles:
     """Chosen topics first; a topic the user chose for one role is no candidate for another."""
+    if choice.no_wheel and choice.wheel is not None:
+        raise LogError(path, f"--wheel-topic {choice.wheel} and --no-wheel contradict each other")
     taken = frozenset(t for t in (choice.imu, choice.gnss, choice.wheel, choice.truth) if t)
 
     def pick(kind: str, accepted: tuple[str, ...], *, truth: bool = False) -> str | None:
@@ -123,7 +129,7 @@ def topic_roles(path: Path, types: dict[str, str], choice: TopicChoice) -> Topic
 
     imu = pick("imu", IMU_TYPES)
     gnss = pick("gnss", FIX_TYPES)
-    wheel = pick("wheel", WHEEL_TYPES)
+    wheel = None if choice.no_wheel else pick("wheel", WHEEL_TYPES)
     truth = pick("truth", FIX_TYPES, truth=True)
     poses = sorted(t for t, m in types.items() if m == ODOM_TYPE and is_truth_topic(t))
     truth_pose = poses[0] if truth is not None and len(poses) == 1 else None

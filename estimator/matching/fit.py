@@ -11,6 +11,7 @@ windows, and the along-track search amplifies a 1e-16 change into 1e-8 m over an
 
 from __future__ import annotations
 
+import dataclasses
 import functools
 from dataclasses import dataclass
 
@@ -46,10 +47,25 @@ class FitSettings:
     cross_residual_factor: float
     sigma_m: float
     """isotropic 1-sigma without ``geometry_covariance``"""
+    plausible_place: bool = False
+    """``extensions.covariance_search``: an unobserved window is paired where the shape allows"""
+    curvature_covariance: bool = False
+    """``extensions.curvature_covariance``: the road's bend over the along-track uncertainty
+    is cross-track noise (with ``geometry_covariance``)"""
 
     @classmethod
     def of(cls, params: Params) -> FitSettings:
         return _settings(params)
+
+    @classmethod
+    def searching(cls, params: Params, half_width_m: float) -> FitSettings:
+        """:meth:`of`, with the along-track search ``half_width_m`` wide when that is wider
+        than ``window.along_search_m`` (``extensions.covariance_search``), in whole steps."""
+        step = params.window.along_search_step_m
+        k_half = int(np.ceil(half_width_m / step))
+        if k_half <= max(int(np.ceil(params.window.along_search_m / step)), 1):
+            return _settings(params)
+        return _widened(params, k_half)
 
 
 @functools.lru_cache(maxsize=64)
@@ -86,7 +102,19 @@ def _settings(params: Params) -> FitSettings:
         cross_sigma_m=po.cross_sigma_m,
         cross_residual_factor=po.cross_residual_factor,
         sigma_m=po.sigma_m,
+        curvature_covariance=ext.curvature_covariance and ext.geometry_covariance,
+        plausible_place=ext.covariance_search and ext.along_track_search,
     )
+
+
+@functools.lru_cache(maxsize=64)
+def _widened(params: Params, k_half: int) -> FitSettings:
+    base = _settings(params)
+    if not base.along_search:
+        return base
+    deltas = base.step_m * np.arange(-k_half, k_half + 1, dtype=np.float64)
+    deltas.setflags(write=False)
+    return dataclasses.replace(base, deltas=deltas)
 
 
 @dataclass(frozen=True)
@@ -128,6 +156,7 @@ def fit_window(
     *,
     pointwise_residual: bool = False,
     grid_scan: bool = False,
+    pos_cov2: F64 | None = None,
 ) -> Fit | None:
     """Register the window (resampled, (N, 2)) to ``road``, its first point at about arc
     length ``s_anchor``; the pseudo-position is moved ``lane_offset`` to the left of the road.
@@ -140,7 +169,9 @@ def fit_window(
 
     ``grid_scan``: the along-track search on a grid the pairs share
     (``FitSettings.grid_ratio``), half the direct scan's time (23 vs 45 us) and equal to it to
-    rounding; the rivals, scored only, use it, as the compiled rival score did."""
+    rounding; the rivals, scored only, use it, as the compiled rival score did.
+
+    ``pos_cov2``: the filter's E/N covariance, for ``curvature_covariance``."""
     n = len(win)
     s = np.empty(n)
     valid = np.empty(n, np.bool_)
@@ -162,6 +193,7 @@ def fit_window(
         s,
         valid,
         q,
+        settings.plausible_place,
     )
     idx = np.flatnonzero(valid)
     n_pairs = len(idx)
@@ -199,19 +231,70 @@ def fit_window(
         tangent=tangent,
         normal=normal,
         z=z,
-        obs_cov=_observation_cov(tangent, normal, sigma, residual, settings),
+        obs_cov=_observation_cov(
+            tangent,
+            normal,
+            sigma,
+            residual,
+            settings,
+            bend_var=_bend_variance(road, s_ref, tangent, normal, pos_cov2, sigma, observed)
+            if settings.curvature_covariance and pos_cov2 is not None
+            else 0.0,
+        ),
     )
 
 
+_BEND_NODES, _BEND_WEIGHTS = np.polynomial.hermite_e.hermegauss(9)
+_BEND_WEIGHTS = _BEND_WEIGHTS / _BEND_WEIGHTS.sum()
+
+
+def _bend_variance(
+    road: Polyline,
+    s_ref: float,
+    tangent: F64,
+    normal: F64,
+    pos_cov2: F64,
+    along_sigma: float,
+    observed: bool,
+) -> float:
+    """E[d^2]: d the distance of the road from its tangent at ``s_ref``, at an arc-length error
+    drawn from the match's along-track uncertainty (the filter's along-track sigma, combined
+    with the fit's where the shape observed it).
+
+    The pseudo-position says "on the road's tangent line at s_ref"; where s_ref is uncertain by
+    sigma on a bend of curvature k, the vehicle is about k sigma^2 / 2 off that line, and the
+    line's direction, turning along the bend, makes a cross-track update inform along-track.
+    With wheel speed sigma is metres and this is nothing; dead-reckoned by an IMU alone it is
+    tens to hundreds of metres, and a matched bend then pulls the estimate to the wrong place
+    with a confident covariance. (Gauss-Hermite over 9 nodes, on the polyline.)"""
+    var_p = float(tangent @ pos_cov2 @ tangent)
+    if not np.isfinite(var_p) or var_p <= 0.0:
+        return 0.0
+    var = 1.0 / (1.0 / var_p + 1.0 / along_sigma**2) if observed else var_p
+    s = s_ref + np.sqrt(var) * _BEND_NODES
+    i = np.clip(np.searchsorted(road.s, s, side="right") - 1, 0, len(road.unit) - 1)
+    pts = road.xy[i] + (s - road.s[i])[:, None] * road.unit[i]
+    j = min(max(int(np.searchsorted(road.s, s_ref, side="right")) - 1, 0), len(road.unit) - 1)
+    ref = road.xy[j] + (s_ref - road.s[j]) * road.unit[j]
+    d = (pts - ref) @ normal
+    return float(_BEND_WEIGHTS @ (d * d))
+
+
 def _observation_cov(
-    tangent: F64, normal: F64, along_sigma: float, residual: float, settings: FitSettings
+    tangent: F64,
+    normal: F64,
+    along_sigma: float,
+    residual: float,
+    settings: FitSettings,
+    *,
+    bend_var: float = 0.0,
 ) -> F64:
     """R_k: along-track as the search observed it, cross-track from the registration
-    residual (``geometry_covariance``); else isotropic."""
+    residual plus ``bend_var`` (``geometry_covariance``); else isotropic."""
     if settings.geometry_covariance:
         cross = max(settings.cross_sigma_m, settings.cross_residual_factor * residual)
         basis = np.array([[tangent[0], normal[0]], [tangent[1], normal[1]]])
-        scale = np.array([[along_sigma**2, 0.0], [0.0, cross**2]])
+        scale = np.array([[along_sigma**2, 0.0], [0.0, cross**2 + bend_var]])
         cov: F64 = basis @ scale @ basis.T
         return cov
     return settings.sigma_m**2 * np.eye(2)

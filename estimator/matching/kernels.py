@@ -233,6 +233,7 @@ def along_track_pairs(
     s_out: F64,
     valid_out: NDArray[np.bool_],
     q_out: F64,
+    plausible: bool = False,
 ) -> tuple[float, float, float, bool]:
     """Where along the route the window's pairs start, and how well route shape says so:
     the mean squared rigid-fit residual at each arc-length offset ``deltas`` from
@@ -244,7 +245,12 @@ def along_track_pairs(
     curvature, 1-sigma, observed): an along-track sigma of ``sigma_max`` or more is
     unobserved (offset 0, sigma ``sigma_max``), a smaller one is floored at ``sigma_min``.
     ``grid_ratio`` > 0: the deltas are a grid ``step`` apart and the spacing is that many
-    steps, scanned by :func:`_scan_grid`; 0: the direct scan."""
+    steps, scanned by :func:`_scan_grid`; 0: the direct scan.
+
+    ``plausible``: where along-track stays unobserved but the shape rules the dead-reckoned
+    place out (its chi-square over the best offset's is above 1, as when the window has
+    entered a bend on one side of a plateau), the pairs are placed at the offset nearest to it
+    that the shape allows, not at the place it rules out (offset still reported 0)."""
     nd = deltas.shape[0]
     ms = np.empty(nd)
     m = np.empty(nd)
@@ -277,11 +283,31 @@ def along_track_pairs(
         elif curvature > 0:
             sigma = np.sqrt(2.0 * noise2 / (max(m[k], 1.0) * curvature))
     observed = sigma < sigma_max
+    place = 0.0
     if not observed:
         offset = 0.0
+        if plausible and search and np.isfinite(ms[k]):
+            place = _nearest_allowed(deltas, ms, m, k, shape_noise)
     sigma = max(sigma, sigma_min) if observed else sigma_max
-    pair_points(win, rxy, rs, runit, s_anchor + offset, spacing, s_out, valid_out, q_out)
+    at = s_anchor + (offset if observed else place)
+    pair_points(win, rxy, rs, runit, at, spacing, s_out, valid_out, q_out)
     return offset, curvature, sigma, observed
+
+
+@njit(cache=True)
+def _nearest_allowed(deltas: F64, ms: F64, m: F64, k: int, shape_noise: float) -> float:
+    """The offset nearest to 0 whose residual's chi-square over the minimum at ``k`` is at
+    most 1 (0 itself when it is allowed)."""
+    j0 = ms[k]
+    noise2 = max(j0 / 2.0, shape_noise**2)
+    w = max(m[k], 1.0)
+    best = -1
+    for i in range(deltas.shape[0]):
+        if not np.isfinite(ms[i]) or w * (ms[i] - j0) / noise2 > 1.0:
+            continue
+        if best < 0 or abs(deltas[i]) < abs(deltas[best]):
+            best = i
+    return 0.0 if best < 0 else float(deltas[best])
 
 
 @njit(cache=True)

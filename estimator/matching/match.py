@@ -164,15 +164,16 @@ def match_geometry(
         search = params.window.route_search_m
         s_anchor = float(project_near(road, win[0], s_guess - span, search)[0][0])
     lane_path = params.extensions.lane_path_matching and abs(lane) > 1e-3
-    pad = params.window.along_search_m + 2.0 * h
-    settings = FitSettings.of(params)
+    search = search_half_width(road, s_anchor + span, cov, params)
+    pad = search + 2.0 * h
+    settings = FitSettings.searching(params, search)
     fit = None
     if lane_path:
         cand = local_piece(road, lane, s_anchor - pad, s_anchor + span + pad)
         if cand is not None and len(win) >= 2:
-            fit = fit_window(win, p, cand, cand.arc_of(win[0]), 0.0, settings)
+            fit = fit_window(win, p, cand, cand.arc_of(win[0]), 0.0, settings, pos_cov2=cov)
     elif len(win) >= 2:
-        fit = fit_window(win, p, road, s_anchor, lane, settings)
+        fit = fit_window(win, p, road, s_anchor, lane, settings, pos_cov2=cov)
     if fit is None:
         return MatchGeometry(
             win=win,
@@ -204,8 +205,28 @@ def match_geometry(
         fit=fit,
         route_s=(s0, s1),
         route_segment=road.segment(s0, s1),
-        scores=_scores(win, p, cov, road, s_anchor, lane, lane_path, fit, params, settings),
+        scores=_scores(win, p, cov, road, s_anchor, lane, lane_path, fit, params, settings, search),
     )
+
+
+def search_half_width(road: Polyline, s_now: float, pos_cov2: F64, params: Params) -> float:
+    """Half-width of the along-track search: ``window.along_search_m``, or with
+    ``extensions.covariance_search`` 3 sigma of the filter's position along the road at the
+    vehicle where that is wider (up to ``window.along_search_max_m``).
+
+    The window is anchored where its dead-reckoned start projects; with wheel speed that is
+    metres from the truth and +-30 m covers it, but an IMU alone lets it slide hundreds of
+    metres along a straight, and a bend searched too narrowly is paired with the wrong stretch
+    of road (which then corrupts cross-track too). The filter's own covariance says how far to
+    look; the search's likelihood interval still decides whether along-track is observed."""
+    base = params.window.along_search_m
+    if not (params.extensions.covariance_search and params.extensions.along_track_search):
+        return base
+    t = road.tangent(s_now)
+    var = float(t @ pos_cov2 @ t)
+    if not np.isfinite(var) or var <= 0.0:
+        return base
+    return float(min(max(base, 3.0 * np.sqrt(var)), max(base, params.window.along_search_max_m)))
 
 
 def _scores(
@@ -219,6 +240,7 @@ def _scores(
     fit: Fit,
     params: Params,
     settings: FitSettings,
+    search: float,
 ) -> Scores:
     nu = fit.z - p
     summary = FitSummary(
@@ -239,7 +261,9 @@ def _scores(
         d2 = mahalanobis2(nu, cov + fit.obs_cov)
         cost = fit_cost(fit, p, cov, settings)
         extra = {"mahalanobis_d2": d2, "cost": cost}
-        rivals = fit_rivals(win, p, cov, road, s_anchor, lane, lane_path, params, settings)
+        rivals = fit_rivals(
+            win, p, cov, road, s_anchor, lane, lane_path, params, settings, search_m=search
+        )
         for r in rivals:
             extra[f"cost_{r.rival.value}"] = r.cost
             extra[f"residual_{r.rival.value}_m"] = r.residual_m

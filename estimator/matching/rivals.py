@@ -43,13 +43,21 @@ class RivalFit:
 
 
 def rival_pieces(
-    n_window: int, s_anchor: float, lane: float, lane_path: bool, params: Params
+    n_window: int,
+    s_anchor: float,
+    lane: float,
+    lane_path: bool,
+    params: Params,
+    *,
+    search_m: float | None = None,
 ) -> tuple[RivalPiece, ...]:
     """The route pieces the rivals of a window of ``n_window`` points anchored at arc length
-    ``s_anchor`` are fitted to."""
+    ``s_anchor`` are fitted to (``search_m``: the candidate's along-track search half-width,
+    ``window.along_search_m`` unless widened)."""
     h = params.window.spacing_m
     span = (n_window - 1) * h
-    pad = params.window.along_search_m + 2.0 * h
+    search = params.window.along_search_m if search_m is None else search_m
+    pad = search + 2.0 * h
     shift = params.gates.alternative_shift_m
     base = lane if lane_path else 0.0
     ahead = (s_anchor - pad, s_anchor + span + pad)
@@ -71,19 +79,29 @@ def fit_rivals(
     lane_path: bool,
     params: Params,
     settings: FitSettings,
+    *,
+    search_m: float | None = None,
 ) -> tuple[RivalFit, ...]:
     """Each rival of the window that can be built and fitted (``settings``: of ``params``).
     ``lane_path``: the candidate was the lane line, so the rivals are shifted lane lines and
     carry no further lane offset."""
     z_lane = 0.0 if lane_path else lane
     out = []
-    for rp in rival_pieces(len(win), s_anchor, lane, lane_path, params):
+    for rp in rival_pieces(len(win), s_anchor, lane, lane_path, params, search_m=search_m):
         piece = local_piece(road, rp.lateral_m, rp.lo, rp.hi, reverse=rp.reverse)
         if piece is None:
             continue
         anchor = piece.arc_of(win[0])
         fit = fit_window(
-            win, p_dr, piece, anchor, z_lane, settings, pointwise_residual=True, grid_scan=True
+            win,
+            p_dr,
+            piece,
+            anchor,
+            z_lane,
+            settings,
+            pointwise_residual=True,
+            grid_scan=True,
+            pos_cov2=cov,
         )
         if fit is None:
             continue

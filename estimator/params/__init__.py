@@ -19,6 +19,7 @@ from estimator.params.declarations import (
     TriggerParams,
     WindowParams,
     for_method,
+    matching_params,
     param,
 )
 from estimator.params.specs import (
@@ -49,6 +50,7 @@ __all__ = [
     "for_method",
     "get_param",
     "load_params",
+    "matching_params",
     "param",
     "param_specs",
     "params_to_toml",

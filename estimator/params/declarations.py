@@ -85,6 +85,15 @@ class WindowParams:
         hi=300,
         step=1,
     )
+    along_search_max_m: float = param(
+        300.0,
+        "with extensions.covariance_search, the widest half-width the along-track search "
+        "grows to (3 sigma of the filter's along-track position)",
+        unit="m",
+        lo=1,
+        hi=2000,
+        step=10,
+    )
     along_search_step_m: float = param(
         1.0,
         "grid step of the along-track offset search (refined by a parabola)",
@@ -361,6 +370,29 @@ class ExtensionParams:
         "only for disagreeing with the filter, by no more than a plausible dead-reckoning drift, "
         "widen the filter's position and heading covariance to the innovation and accept",
     )
+    curvature_covariance: bool = param(
+        False,
+        "a pseudo-position's cross-track variance includes how far the road bends away from "
+        "its tangent over the along-track uncertainty of the match (the filter's, or the fit's "
+        "where the shape observes it): a road 150 m further round a bend is 5 m off the "
+        "tangent, and the cross-track direction turning along a bend otherwise claims "
+        "along-track position nobody observed",
+    )
+    covariance_search: bool = param(
+        False,
+        "widen the along-track search to 3 sigma of the filter's own along-track position "
+        "(up to window.along_search_max_m) when that exceeds window.along_search_m, and pair a "
+        "window whose along-track stays unobserved at the nearest place its shape allows: "
+        "without wheel speed the dead-reckoned position slides hundreds of metres along the "
+        "road, and a bend searched only +-30 m around it is paired with the wrong stretch",
+    )
+    no_wheel_caution: bool = param(
+        True,
+        "on a log without wheel speed, switch on covariance_search, curvature_covariance and "
+        "overlap_inflation (the dead-reckoned along-track position is then uncertain by tens "
+        "to hundreds of metres, which is what they are for); a log with wheel speed is "
+        "matched as the other switches say",
+    )
     map_bias: bool = param(
         False,
         "learn where the route lies relative to the road driven (along and across) from the "
@@ -597,6 +629,19 @@ class Params:
     output_rate_hz: float = param(
         20.0, "rate of the per-epoch results kept for inspection", unit="Hz", lo=1, hi=200, step=1
     )
+
+
+def matching_params(params: Params, *, have_wheel: bool) -> Params:
+    """The parameters the route matcher runs with on a log with or without wheel speed: with
+    ``extensions.no_wheel_caution`` and no wheel speed, the switches for a dead-reckoned
+    along-track position that is uncertain by tens to hundreds of metres are on."""
+    ext = params.extensions
+    if have_wheel or not ext.no_wheel_caution:
+        return params
+    cautious = replace(
+        ext, covariance_search=True, curvature_covariance=True, overlap_inflation=True
+    )
+    return params if cautious == ext else replace(params, extensions=cautious)
 
 
 def for_method(params: Params, method: Method) -> Params:

@@ -67,7 +67,7 @@ from estimator.matching.kernels import max_turn_deg, search_right, track_window
 from estimator.matching.map_bias import MapBias, learn_map_bias, prior_bias
 from estimator.matching.reanchor import should_reanchor, within_drift
 from estimator.nav.frames import LocalFrame
-from estimator.params import Method, Params, for_method
+from estimator.params import Method, Params, for_method, matching_params
 from estimator.pipeline.reuse import (
     Checkpoint,
     Memo,
@@ -222,7 +222,8 @@ class Driver:
     ) -> None:
         self.log = log
         self._route = route
-        self.p = p
+        self.p = matching_params(p, have_wheel=len(inputs.wheel_t) > 0)
+        """the parameters as the matcher runs with them (:func:`matching_params`)"""
         self.matching = matching
         self.inp = inputs
         self.filt = Filter(inputs, source=log.path, t_start=log.t_start, progress=progress)

@@ -25,7 +25,7 @@ from estimator.filter.setup import FilterInputs
 from estimator.log import Log
 from estimator.matching.reanchor import blames_the_filter
 from estimator.nav.frames import LocalFrame
-from estimator.params import Params
+from estimator.params import Params, matching_params
 from estimator.results import MatchRecord, Run
 from estimator.route import Route
 
@@ -176,6 +176,7 @@ def resume(d: Driver, old: ReuseState, old_params: Params, *, reuse_matching: bo
     """Replay the old run's checkpoints with ``d``'s matching parameters until one gives a
     different outcome, then run live from there."""
     p = d.p
+    old_params = matching_params(old_params, have_wheel=len(d.inp.wheel_t) > 0)
     d.filt.out = old.out
     outage_cps = [c for c in old.checkpoints if c.kind == "outage"]
     same_trigger = (

@@ -61,6 +61,11 @@ def add_topic_options(parser: argparse.ArgumentParser) -> None:
             default=None,
             help=f"topic to read the {kind} stream from",
         )
+    g.add_argument(
+        "--no-wheel",
+        action="store_true",
+        help="leave the wheel speed out (IMU + GNSS only) even when the log has a wheel topic",
+    )
 
 
 def add_outage_option(parser: argparse.ArgumentParser) -> None:

@@ -1,0 +1,130 @@
+"""IMU-only logs (issue 17, item 4): the wheel topic can be left out, the simulated IMU-only
+drives carry their faults, and without wheel speed routefuse is no worse than dead reckoning
+where it used to be (the matcher's no-wheel caution)."""
+
+from __future__ import annotations
+
+from pathlib import Path
+
+import numpy as np
+import pytest
+
+from estimator.errors import LogError
+from estimator.evaluation.metrics import method_metrics
+from estimator.io import TopicChoice
+from estimator.matching.fit import _bend_variance
+from estimator.matching.geometry import Polyline
+from estimator.matching.match import search_half_width
+from estimator.params import Params, for_method, load_params, matching_params, with_values
+from estimator.pipeline import open_inputs, run_methods
+from estimator.route import Route
+from estimator.sim.imu_only import build_imu_only, imu_only_spec
+
+REPO = Path(__file__).resolve().parents[2]
+COMMA = REPO.parent / "shared" / "data" / "comma2k19"
+needs_comma = pytest.mark.skipif(
+    not (COMMA / "i280.mcap").is_file(), reason="comma2k19 data not present"
+)
+
+
+def _truth_rmse(inputs, params, method, outages=()):  # type: ignore[no-untyped-def]
+    run = run_methods(inputs, params, methods=(method,), outages=outages).runs[method]
+    truth = method_metrics(run, inputs.route, inputs.log, params=params).truth
+    assert truth is not None and truth.rmse_h_err_m is not None
+    return float(truth.rmse_h_err_m)
+
+
+def test_the_caution_is_only_for_logs_without_wheel_speed() -> None:
+    p = Params()
+    assert matching_params(p, have_wheel=True) is p
+    ext = matching_params(p, have_wheel=False).extensions
+    assert ext.covariance_search and ext.curvature_covariance and ext.overlap_inflation
+    off = with_values(p, {"extensions.no_wheel_caution": False})
+    assert matching_params(off, have_wheel=False) is off
+    paper = for_method(p, "paper")
+    assert matching_params(paper, have_wheel=False) is paper
+
+
+def test_the_search_widens_with_the_filters_along_track_sigma() -> None:
+    p = with_values(Params(), {"extensions.covariance_search": True})
+    road = Polyline.of(Route(np.array([[0.0, 0.0], [2000.0, 0.0]])))
+    small = np.diag([4.0, 1.0])
+    assert search_half_width(road, 500.0, small, p) == p.window.along_search_m
+    assert search_half_width(road, 500.0, np.diag([50.0**2, 1.0]), p) == pytest.approx(150.0)
+    assert search_half_width(road, 500.0, np.diag([1e6, 1.0]), p) == p.window.along_search_max_m
+    # across the road the filter's uncertainty says nothing about where along it to look
+    assert search_half_width(road, 500.0, np.diag([4.0, 1e6]), p) == p.window.along_search_m
+    assert search_half_width(road, 500.0, np.diag([1e6, 1.0]), Params()) == 30.0
+
+
+def test_a_bend_under_an_uncertain_along_track_is_cross_track_noise() -> None:
+    tangent, normal = np.array([1.0, 0.0]), np.array([0.0, 1.0])
+    straight = Polyline.of(Route(np.array([[-1000.0, 0.0], [1000.0, 0.0]])))
+    cov = np.diag([100.0**2, 1.0])
+    assert _bend_variance(straight, 1000.0, tangent, normal, cov, 100.0, False) == 0.0
+    radius = 2500.0
+    a = np.linspace(-0.4, 0.4, 801)
+    arc = np.column_stack([radius * np.sin(a), radius * (1.0 - np.cos(a))])
+    road = Polyline.of(Route(arc))
+    s_mid = float(road.s[-1] / 2)
+    var = _bend_variance(road, s_mid, tangent, normal, cov, 100.0, False)
+    # d = s^2 / (2 R), s ~ N(0, sigma^2): E[d^2] = 3 sigma^4 / (4 R^2)
+    assert var == pytest.approx(3 * 100.0**4 / (4 * radius**2), rel=0.05)
+    # a shape that observed along-track to 2 m leaves almost nothing of it
+    assert _bend_variance(road, s_mid, tangent, normal, cov, 2.0, True) < 1e-4 * var
+
+
+def test_an_imu_only_drive_is_a_pure_function_of_its_index_and_has_its_faults() -> None:
+    spec = imu_only_spec(5)
+    assert spec == imu_only_spec(5) and spec != imu_only_spec(6)
+    assert 300 <= spec.gyro_bias_deg_h <= 720 and 5_000 <= spec.accel_scale_ppm <= 12_000
+    assert 1.0 <= abs(spec.mount_pitch_deg) <= 4.0 and 1.0 <= abs(spec.mount_yaw_deg) <= 3.0
+    assert 0.01 <= abs(spec.imu_time_offset_s) <= 0.05
+    a, b = build_imu_only(spec), build_imu_only(spec)
+    np.testing.assert_array_equal(a.inputs.log.imu.accel, b.inputs.log.imu.accel)
+    log = a.inputs.log
+    assert log.wheel is None and a.inputs.route is not None
+    # standing still before the drive: gravity leaks into x by the mount's pitch (a nose-down
+    # mount, a negative pitch as sensors.imu_pitch_deg has it, reads a negative x)
+    still = log.imu.t < log.imu.t[0] + 2.0
+    fx, fz = np.mean(log.imu.accel[still, 0]), np.mean(log.imu.accel[still, 2])
+    pitch = np.degrees(np.arctan2(fx, fz))
+    assert pitch == pytest.approx(spec.mount_pitch_deg, abs=0.3)
+
+
+def test_without_wheel_speed_routefuse_is_no_worse_than_dead_reckoning_on_a_long_tunnel() -> None:
+    """Drive 4: the long tunnel without wheel speed, a 557 deg/h gyro and a misaligned IMU.
+    Before the caution routefuse was worse than the baseline there (a bend paired 100 m off
+    and the covariance pinned along-track by it); with it, it is better."""
+    drive = build_imu_only(imu_only_spec(4))
+    inputs = drive.inputs
+    baseline = _truth_rmse(inputs, Params(), "baseline")
+    proposed = _truth_rmse(inputs, Params(), "proposed")
+    before = _truth_rmse(
+        inputs, with_values(Params(), {"extensions.no_wheel_caution": False}), "proposed"
+    )
+    assert proposed <= baseline
+    assert before > baseline
+
+
+@needs_comma
+def test_the_wheel_topic_can_be_left_out() -> None:
+    full = open_inputs(COMMA / "i280.mcap")
+    assert full.log.wheel is not None
+    bare = open_inputs(COMMA / "i280.mcap", topics=TopicChoice(no_wheel=True))
+    assert bare.log.wheel is None
+    np.testing.assert_array_equal(bare.log.imu.gyro, full.log.imu.gyro)
+    with pytest.raises(LogError, match="--no-wheel"):
+        open_inputs(COMMA / "i280.mcap", topics=TopicChoice(wheel="/wheel/odom", no_wheel=True))
+
+
+@needs_comma
+def test_comma2k19_without_wheel_speed_routefuse_is_no_worse_than_dead_reckoning() -> None:
+    inputs = open_inputs(
+        COMMA / "i280.mcap", COMMA / "i280_route.geojson", topics=TopicChoice(no_wheel=True)
+    )
+    params = load_params(REPO / "sample_logs" / "configs" / "comma2k19_i280.toml")
+    outage = ((25.0, 55.0),)
+    baseline = _truth_rmse(inputs, params, "baseline", outage)
+    proposed = _truth_rmse(inputs, params, "proposed", outage)
+    assert proposed <= baseline
