@@ -52,6 +52,8 @@ class FitSettings:
     curvature_covariance: bool = False
     """``extensions.curvature_covariance``: the road's bend over the along-track uncertainty
     is cross-track noise (with ``geometry_covariance``)"""
+    weak_along_track: bool = False
+    """``extensions.weak_along_track``: along-track weaker than the filter's is not used"""
 
     @classmethod
     def of(cls, params: Params) -> FitSettings:
@@ -104,6 +106,7 @@ def _settings(params: Params) -> FitSettings:
         sigma_m=po.sigma_m,
         curvature_covariance=ext.curvature_covariance and ext.geometry_covariance,
         plausible_place=ext.covariance_search and ext.along_track_search,
+        weak_along_track=ext.weak_along_track and ext.geometry_covariance,
     )
 
 
@@ -213,6 +216,12 @@ def fit_window(
     tangent = road.tangent(s_ref)
     normal = np.array([-tangent[1], tangent[0]])
     z = p_ref + lane_offset * normal
+    if observed and settings.weak_along_track and _weaker_than_filter(sigma, tangent, pos_cov2):
+        along = float((p_ref - p_dr) @ tangent)
+        p_ref = p_ref - along * tangent
+        s_ref -= along
+        z = z - along * tangent
+        observed, sigma = False, settings.along_sigma_max_m
     return Fit(
         s_first=float(s[idx[0]]),
         valid=valid,
@@ -242,6 +251,14 @@ def fit_window(
             else 0.0,
         ),
     )
+
+
+def _weaker_than_filter(along_sigma: float, tangent: F64, pos_cov2: F64 | None) -> bool:
+    """The fit's along-track sigma exceeds the filter's own along the road."""
+    if pos_cov2 is None:
+        return False
+    var_p = float(tangent @ pos_cov2 @ tangent)
+    return bool(np.isfinite(var_p) and along_sigma**2 > var_p)
 
 
 _BEND_NODES, _BEND_WEIGHTS = np.polynomial.hermite_e.hermegauss(9)

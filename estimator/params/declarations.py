@@ -364,6 +364,13 @@ class ExtensionParams:
         "along-track variance is multiplied by the window length over the distance since the "
         "previous accepted match",
     )
+    weak_along_track: bool = param(
+        False,
+        "a match whose along-track sigma is larger than the filter's own along-track sigma is "
+        "applied across the road only, at the dead-reckoned along-track position: it would add "
+        "little along the road but carry the window's shape error there (a gentle bend under a "
+        "gyro drift fits metres to tens of metres off, the same way attempt after attempt)",
+    )
     reanchor: bool = param(
         False,
         "when consecutive shape-valid matches with no better-shaped rival keep being refused "
