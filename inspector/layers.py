@@ -27,6 +27,7 @@ H = TypeVar("H", bound=viser.SceneNodeHandle)
 
 ROUTE = (120, 120, 120)
 SEGMENT = (255, 200, 0)
+MAP_SEGMENT = (150, 110, 40)
 BASELINE = (232, 113, 10)
 PROPOSED = (26, 115, 232)
 TRUTH = (30, 150, 60)
@@ -42,6 +43,7 @@ REJECTED = (220, 40, 40)
 COLOUR_NAMES: dict[RGB, str] = {
     ROUTE: "grey",
     SEGMENT: "yellow",
+    MAP_SEGMENT: "brown",
     BASELINE: "orange",
     PROPOSED: "blue",
     TRUTH: "dark green",
@@ -370,6 +372,7 @@ class MatchLayer(Layer):
     label = "current match attempt"
     legend = (
         (SEGMENT, "route segment matched"),
+        (MAP_SEGMENT, "that segment where the map draws it (with extensions.map_bias)"),
         (DR_WINDOW, "DR window (dead-reckoned track)"),
         (ALIGNED, "DR window aligned onto the route"),
         (PAIRS, "point pairs"),
@@ -377,6 +380,7 @@ class MatchLayer(Layer):
     )
     _parts = (
         "segment",
+        "map_segment",
         "window",
         "aligned",
         "pairs",
@@ -411,6 +415,10 @@ class MatchLayer(Layer):
         route_pts = np.asarray(m.route_points, np.float64).reshape(-1, 2)
         seg = np.asarray(m.route_segment, np.float64).reshape(-1, 2)
         self._lines("segment", polyline_segments(seg, 0.02), SEGMENT, 7.0)
+        map_seg = np.zeros((0, 2))
+        if m.map_bias is not None and np.all(np.isfinite(m.map_bias.offset)):
+            map_seg = seg + np.asarray(m.map_bias.offset, np.float64).reshape(1, 2)
+        self._lines("map_segment", polyline_segments(map_seg, 0.01), MAP_SEGMENT, 3.0)
         self._lines("window", polyline_segments(win, 0.3), DR_WINDOW, 3.0)
         aligned = np.zeros((0, 2))
         c, s = np.cos(m.rotation_rad), np.sin(m.rotation_rad)
@@ -463,6 +471,7 @@ class MatchLayer(Layer):
             h.position = position
         shown = {
             "segment": len(seg) > 1,
+            "map_segment": len(map_seg) > 1,
             "window": len(win) > 1,
             "aligned": len(aligned) > 1,
             "pairs": len(pair_seg) > 0,

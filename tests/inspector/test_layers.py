@@ -70,3 +70,36 @@ def test_toggling_a_layer_hides_its_nodes(server):
     layers.set_visible("baseline", False)
     assert not layers.layers["baseline"]._handles["line"].visible
     layers.remove()
+
+
+def test_a_match_with_a_map_bias_draws_the_segment_where_the_map_has_it(server):
+    """With ``extensions.map_bias`` the window is matched to the route moved back by the
+    learned bias; the map's own segment is drawn beside it, ``offset`` away, and hidden for a
+    match without a bias."""
+    import dataclasses
+
+    from estimator.results import MapBiasUse
+
+    run = make_run()
+    offset = np.array([6.0, -2.5])
+    bias = MapBiasUse(offset=offset, cov=np.eye(2), along_observed=True)
+    k = next(i for i, m in enumerate(run.matches) if m.index == 1)  # on screen at T0 + 45
+    matches = tuple(
+        dataclasses.replace(m, map_bias=bias) if i == k else m for i, m in enumerate(run.matches)
+    )
+    data = SceneData.build(
+        baseline=make_run(method="baseline"),
+        proposed=dataclasses.replace(run, matches=matches),
+        route=make_route(),
+        log=None,
+    )
+    layers = SceneLayers(server.scene, root="/test3")
+    layers.set_data(data)
+    match = layers.layers["match"]
+    layers.draw(T0 + 45)
+    matched, on_map = match._handles["segment"].points, match._handles["map_segment"].points
+    assert match._handles["map_segment"].visible and on_map.shape == matched.shape
+    assert np.allclose(on_map[..., :2] - matched[..., :2], offset, atol=1e-4)
+    layers.draw(T0 + 50)
+    assert not match._handles["map_segment"].visible
+    layers.remove()
