@@ -70,6 +70,10 @@ Outages = tuple[tuple[float, float], ...]
 REALIGN_WITHIN_S = 30.0
 """After an IMU gap the filter is aligned afresh when the GNSS track gives a chord this soon
 after the gap's end; later, the fixes' own corrections are left to bring the heading back."""
+REALIGN_FIX_AT_END_S = 1.0
+"""...and only when GNSS was there as the IMU came back (a fix this soon after the gap's end).
+A gap that ends in a tunnel is left to the GNSS return at the portal, whose first fixes are too
+noisy for a short chord (a 20 m chord through them was 15-20 deg off)."""
 
 
 @dataclass(frozen=True)
@@ -201,7 +205,7 @@ def _realignments(
         k1 = int(g) + 1
         b = float(imu_t[k1])
         fixes = (gnss_t >= b) & (gnss_t <= b + REALIGN_WITHIN_S)
-        if fixes.sum() < 2:
+        if fixes.sum() < 2 or gnss_t[fixes][0] > b + REALIGN_FIX_AT_END_S:
             continue
         try:
             x, P, k, _t_fix, _notes = align(
@@ -237,8 +241,9 @@ def _realignment_notes(
             notes.append(f"{span}: re-aligned from the GNSS track at {after[0] - t_start:.1f} s")
         else:
             notes.append(
-                f"{span}: no GNSS track to re-align from within {REALIGN_WITHIN_S:g} s after it; "
-                "the heading carried across it is uncertain"
+                f"{span}: not re-aligned (no GNSS as the IMU came back, or no straight GNSS "
+                f"track within {REALIGN_WITHIN_S:g} s after it); the heading carried across it "
+                "is left to the fixes after it"
             )
     return notes
 
