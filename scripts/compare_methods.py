@@ -24,7 +24,6 @@ from __future__ import annotations
 
 import argparse
 import dataclasses
-import re
 import sys
 import time
 from pathlib import Path
@@ -33,6 +32,8 @@ import numpy as np
 
 REPO = Path(__file__).resolve().parents[1]
 sys.path.insert(0, str(REPO))
+
+from _doc_blocks import replace_block  # noqa: E402
 
 from estimator.evaluation.metrics import (  # noqa: E402
     MethodMetrics,
@@ -214,14 +215,6 @@ def measure() -> dict[str, str]:
     }
 
 
-def _replace_block(text: str, name: str, body: str) -> str:
-    begin, end = MARK.format(f"{name} begin"), MARK.format(f"{name} end")
-    pattern = re.compile(re.escape(begin) + r".*?" + re.escape(end), re.S)
-    if not pattern.search(text):
-        raise SystemExit(f"marker {begin!r} not found")
-    return pattern.sub(lambda _: f"{begin}\n{body}\n{end}", text)
-
-
 def main(argv: list[str] | None = None) -> int:
     parser = argparse.ArgumentParser(description=__doc__.splitlines()[0])
     parser.add_argument(
@@ -236,11 +229,11 @@ def main(argv: list[str] | None = None) -> int:
         text = doc.read_text(encoding="utf-8")
         for name, body in tables.items():
             if name != "readme":
-                text = _replace_block(text, name, body)
+                text = replace_block(text, MARK, name, body)
         doc.write_text(text, encoding="utf-8")
         readme = REPO / "README.md"
         readme.write_text(
-            _replace_block(readme.read_text(encoding="utf-8"), "readme", tables["readme"]),
+            replace_block(readme.read_text(encoding="utf-8"), MARK, "readme", tables["readme"]),
             encoding="utf-8",
         )
     return 0

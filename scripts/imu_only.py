@@ -27,8 +27,6 @@ table between the ``imu_only.py`` markers of ``docs/integrity.md``.
 from __future__ import annotations
 
 import argparse
-import csv
-import re
 import sys
 import time
 from pathlib import Path
@@ -36,6 +34,8 @@ from typing import Any
 
 REPO = Path(__file__).resolve().parents[1]
 sys.path.insert(0, str(REPO))
+
+from _doc_blocks import write_block, write_rows  # noqa: E402
 
 COMMA = REPO.parent / "shared" / "data" / "comma2k19"
 COMMA_CONFIG = REPO / "sample_logs" / "configs" / "comma2k19_i280.toml"
@@ -216,20 +216,9 @@ def main(argv: list[str] | None = None) -> int:
     print(text)
     print(f"imu_only: {time.perf_counter() - started:.0f} s", file=sys.stderr)
     if args.out is not None:
-        args.out.mkdir(parents=True, exist_ok=True)
-        columns = list(dict.fromkeys(k for r in rows for k in r))
-        with open(args.out / "imu_only.csv", "w", newline="", encoding="utf-8") as f:
-            writer = csv.DictWriter(f, columns)
-            writer.writeheader()
-            writer.writerows(rows)
+        write_rows(args.out / "imu_only.csv", rows)
     if args.write:
-        doc = REPO / "docs" / "integrity.md"
-        begin, end = MARK.format("table begin"), MARK.format("table end")
-        pattern = re.compile(re.escape(begin) + r".*?" + re.escape(end), re.S)
-        old = doc.read_text(encoding="utf-8")
-        if not pattern.search(old):
-            raise SystemExit(f"{doc}: marker {begin!r} not found")
-        doc.write_text(pattern.sub(lambda _: f"{begin}\n{text}\n{end}", old), encoding="utf-8")
+        write_block(REPO / "docs" / "integrity.md", MARK, "table", text)
     return 0
 
 

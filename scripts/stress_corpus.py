@@ -15,8 +15,6 @@ markers. Each drive is a Dask task (a LocalCluster of ``--workers`` processes).
 from __future__ import annotations
 
 import argparse
-import csv
-import re
 import statistics
 import sys
 import time
@@ -25,6 +23,8 @@ from typing import Any
 
 REPO = Path(__file__).resolve().parents[1]
 sys.path.insert(0, str(REPO))
+
+from _doc_blocks import write_block, write_rows  # noqa: E402
 
 RUNS: dict[str, tuple[str, dict[str, Any]]] = {
     "baseline": ("baseline", {}),
@@ -161,20 +161,9 @@ def main(argv: list[str] | None = None) -> int:
     print(text)
     print(f"stress: {time.perf_counter() - started:.0f} s", file=sys.stderr)
     if args.out is not None:
-        args.out.mkdir(parents=True, exist_ok=True)
-        columns = list(dict.fromkeys(k for r in rows for k in r))
-        with open(args.out / "stress.csv", "w", newline="", encoding="utf-8") as f:
-            writer = csv.DictWriter(f, columns)
-            writer.writeheader()
-            writer.writerows(rows)
+        write_rows(args.out / "stress.csv", rows)
     if args.write:
-        doc = REPO / "docs" / "integrity.md"
-        begin, end = MARK.format("summary begin"), MARK.format("summary end")
-        pattern = re.compile(re.escape(begin) + r".*?" + re.escape(end), re.S)
-        old = doc.read_text(encoding="utf-8")
-        if not pattern.search(old):
-            raise SystemExit(f"{doc}: marker {begin!r} not found")
-        doc.write_text(pattern.sub(lambda _: f"{begin}\n{text}\n{end}", old), encoding="utf-8")
+        write_block(REPO / "docs" / "integrity.md", MARK, "summary", text)
     return 0
 
 
