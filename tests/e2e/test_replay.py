@@ -214,6 +214,13 @@ def test_the_space_bar_plays_and_pauses(page):
     assert page.locator("#rf-play").text_content() == "Pause"
     page.keyboard.press("Space")
     assert page.locator("#rf-play").text_content() == "Play"
+    page.click("#rf-play")  # the button keeps the focus: space presses it, once
+    assert page.locator("#rf-play").text_content() == "Pause"
+    page.keyboard.press("Space")
+    assert page.locator("#rf-play").text_content() == "Play"
+    before = _scene_time(page)
+    page.wait_for_timeout(1000)
+    assert _scene_time(page) == before  # viser's own player did not start either
 
 
 def test_the_legend_names_every_colour(page):

@@ -133,10 +133,11 @@
   window.addEventListener(
     "keydown",
     (event) => {
+      if (event.code !== "Space") return;
+      event.stopImmediatePropagation(); // viser's own player must not start beside this one
       const tag = document.activeElement && document.activeElement.tagName;
-      if (event.code !== "Space" || tag === "INPUT" || tag === "SELECT") return;
+      if (["INPUT", "SELECT", "BUTTON", "TEXTAREA"].includes(tag)) return; // the control's own
       event.preventDefault();
-      event.stopImmediatePropagation();
       setPlaying(!playing);
     },
     true,
