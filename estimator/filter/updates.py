@@ -365,6 +365,33 @@ def set_map_bias(P: F64, aux: F64, cfg: F64, cov: F64) -> None:
 
 
 @kernel
+def clone_route_errors(P: F64, aux: F64, cfg: F64, gain: F64, cov: F64) -> None:
+    """Start an outage's lane-offset and map-bias errors (``E_LANE``, ``E_MAP``) as ``gain``
+    (3, 2) times the E/N position error plus an independent part of covariance ``cov`` (3, 3).
+
+    The lane offset and the map's bias are learned from the GNSS-good estimate before the
+    outage (:mod:`estimator.matching.map_bias`), so they are wrong by that estimate's own error
+    (the receiver's slow wander) through the fit's gain, and every pseudo-position of the outage
+    shares it: cloned from the position error, consecutive matches hold the estimate to the road
+    while its absolute variance stays what GNSS left (:func:`clone_lane_offset` is the case of
+    a lane offset alone)."""
+    flush_covariance(P, aux, cfg)
+    rows = np.empty((3, NE))
+    for k in range(3):
+        for j in range(NE):
+            rows[k, j] = gain[k, 0] * P[E_POS, j] + gain[k, 1] * P[E_POS + 1, j]
+    for k in range(3):
+        for j in range(NE):
+            if j < E_LANE:
+                P[E_LANE + k, j] = rows[k, j]
+                P[j, E_LANE + k] = rows[k, j]
+    for k in range(3):
+        for m in range(3):
+            v = gain[m, 0] * rows[k, E_POS] + gain[m, 1] * rows[k, E_POS + 1] + cov[k, m]
+            P[E_LANE + k, E_LANE + m] = v
+
+
+@kernel
 def grow_map_bias(P: F64, var: float) -> None:
     """The map's bias changes along the road: add ``var`` (m^2) to each axis of its error."""
     for i in range(2):

@@ -278,19 +278,37 @@ class OffsetParams:
         step=0.5,
     )
     map_bias_cross_sigma_m: float = param(
-        1.5,
-        "1-sigma of the map's bias across the road at the outage start: a straight approach "
-        "cannot tell the lane from a map shifted sideways, which a later bend turns into "
-        "along-track error",
+        5.0,
+        "1-sigma of the map's bias across the road before it is learned: a straight approach "
+        "cannot tell the lane from a map shifted sideways, and this prior with "
+        "offset.map_bias_lane_sigma_m shares the offset seen out between them",
+        unit="m",
+        lo=0.1,
+        hi=100,
+        step=0.1,
+    )
+    map_bias_lane_sigma_m: float = param(
+        2.0,
+        "1-sigma of the vehicle's lane offset from the road's centreline (the prior that keeps "
+        "a sideways map shift from being taken for a lane the vehicle keeps through bends)",
+        unit="m",
+        lo=0.1,
+        hi=20,
+        step=0.1,
+    )
+    map_bias_null_sigma_m: float = param(
+        0.0,
+        "1-sigma of the map-bias error carried when the learned bias is not significant and "
+        "is not applied",
         unit="m",
         lo=0,
-        hi=50,
+        hi=20,
         step=0.1,
     )
     map_bias_min_sigmas: float = param(
         2.5,
-        "an along-track bias measured within this many of its sigmas of zero is not applied "
-        "(its uncertainty still is)",
+        "a bias whose chi-square against zero (2 dof, its full covariance) is below this "
+        "squared is not applied",
         lo=0,
         hi=10,
         step=0.1,

@@ -53,7 +53,7 @@ from estimator.filter.portal import advance_to_outage
 from estimator.filter.propagation import flush_covariance
 from estimator.filter.route_update import applied_obs_cov, apply_route_match
 from estimator.filter.setup import FilterInputs, prepare_inputs
-from estimator.filter.updates import clone_lane_offset, grow_map_bias, set_map_bias
+from estimator.filter.updates import clone_lane_offset, clone_route_errors, grow_map_bias
 from estimator.log import Log
 from estimator.matching import (
     MatchGeometry,
@@ -277,11 +277,15 @@ class Driver:
                 if not self.matching:
                     continue
                 self.begin_interval(a, f.out, f.n_out, f.x, f.aux)
-                if self.p.extensions.lane_offset_state and self.track.s is not None:
+                bias = self.track.bias
+                if bias is not None:
+                    gain, cov = bias.gain.copy(), bias.cov.copy()
+                    if not self.p.extensions.lane_offset_state:
+                        gain[0], cov[0], cov[:, 0] = 0.0, 0.0, 0.0
+                    clone_route_errors(f.P, f.aux, self.inp.cfg, gain, cov)
+                elif self.p.extensions.lane_offset_state and self.track.s is not None:
                     t = self.route.tangent_at(self.track.s)[0]
                     clone_lane_offset(f.P, f.aux, self.inp.cfg, np.array([-t[1], t[0]]))
-                if self.track.bias is not None:
-                    set_map_bias(f.P, f.aux, self.inp.cfg, self.track.bias.cov)
             while True:
                 t_try = a + tr.min_outage_s + k * tr.interval_s
                 if t_try >= b or t_try > self.inp.imu_t[-1]:
@@ -354,6 +358,7 @@ class Driver:
         tr.bias, tr.biased_route = None, None
         if self.p.extensions.map_bias:
             tr.bias = self._learn_bias(rows, last, s_last)
+            tr.lane = tr.bias.lane
             tr.biased_route = Route(
                 self.route.xy - tr.bias.offset, name=self.route.name, source=self.route.source
             )
@@ -361,14 +366,16 @@ class Driver:
     def _learn_bias(self, rows: F64, last: NDArray[np.intp], s_last: float) -> MapBias:
         """The map bias from the estimate over the last ``offset.map_bias_track_m`` of travel
         up to the last epoch a fix was used in (:func:`learn_map_bias`)."""
+        lane = self.track.lane
+        prior = prior_bias(self.p, lane=lane, normal=self.route.normal_at(np.array([s_last]))[0])
         if not len(last):
-            return prior_bias(self.p)
+            return prior
         end = int(last[-1])
         d = rows[: end + 1, O_DIST]
         i0 = int(search_right(d, float(d[end]) - self.p.offset.map_bias_track_m))
         track = rows[i0 : end + 1]
         if np.count_nonzero(track[:, O_GNSS] > 0) < 5:
-            return prior_bias(self.p)
+            return prior
         sig = track[-1, O_SIG_POS : O_SIG_POS + 2]
         return learn_map_bias(
             track[:, O_POS : O_POS + 2],
