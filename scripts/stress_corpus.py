@@ -30,6 +30,7 @@ RUNS: dict[str, tuple[str, dict[str, Any]]] = {
     "baseline": ("baseline", {}),
     "routefuse": ("proposed", {}),
     "map_bias": ("proposed", {"extensions.map_bias": True}),
+    "map_bias_w0": ("proposed", {"extensions.map_bias": True, "offset.map_bias_walk_m_per_sqrt_km": 0.0}),
 }
 """label: (method, parameters)"""
 CHI2_2DOF_95 = 5.991

@@ -17,9 +17,12 @@ from estimator.filter.layout import (
     A_GYRO_N,
     A_GYRO_SUM,
     A_INFLATE,
+    A_ROUTE,
+    A_ROUTE_EST,
     C_AID_DT,
     C_ARW2,
     C_NHC_VAR,
+    C_ROUTE_EST,
     C_SCALE_ON,
     C_WHEEL_VAR,
     C_WIE,
@@ -124,30 +127,44 @@ def apply_update(x: F64, P: F64, y: F64, m: int, PHt: F64, Si: F64, scale_on: bo
     the nominal state at once, so it is zero between updates)."""
     K = np.empty((NE, 3))
     dx = np.empty(NE)
-    _apply_gain(x, P, y, m, PHt, Si, scale_on, K, dx)
+    _apply_gain(x, P, y, m, PHt, Si, scale_on, K, dx, NE)
 
 
 @kernel
 def _apply_gain(
-    x: F64, P: F64, y: F64, m: int, PHt: F64, Si: F64, scale_on: bool, K: F64, dx: F64
+    x: F64,
+    P: F64,
+    y: F64,
+    m: int,
+    PHt: F64,
+    Si: F64,
+    scale_on: bool,
+    K: F64,
+    dx: F64,
+    last_considered: int,
 ) -> None:
-    # the lane-offset and map-bias errors are considered, not estimated (Schmidt): their gain
-    # is zero, and as the last states the symmetric update below then leaves their covariance
-    # as it was
+    # the states from E_LANE up to last_considered (the lane-offset and map-bias errors, but
+    # for the map bias where a route pseudo-position estimates it) are considered, not
+    # estimated (Schmidt): their gain is zero, and as the last states the symmetric update
+    # below then leaves their covariance as it was
     for i in range(NE):
         for a in range(m):
             acc = 0.0
             for b in range(m):
                 acc += PHt[i, b] * Si[b, a]
             K[i, a] = acc  # K = P H^T S^-1
-    for i in range(E_LANE, NE):
+    for i in range(E_LANE, last_considered):
         for a in range(m):
             K[i, a] = 0.0
     for i in range(NE):
+        considered = E_LANE <= i < last_considered
         for j in range(i, NE):
             acc = 0.0
             for a in range(m):
-                acc += K[i, a] * PHt[j, a]
+                if considered:
+                    acc += PHt[i, a] * K[j, a]  # P <- P - P H^T K^T for a considered row
+                else:
+                    acc += K[i, a] * PHt[j, a]
             v = P[i, j] - acc  # P <- P - K (P H^T)^T = P - K H P
             P[i, j] = v
             P[j, i] = v
@@ -320,7 +337,13 @@ def pseudo_position_update(
             R[a, b] = R2[a, b]
     p0, p1 = x[X_POS], x[X_POS + 1]
     innovation_cov(P, H, R, 2, PHt, S, Si)
-    apply_update(x, P, y, 2, PHt, Si, cfg[C_SCALE_ON] > 0)
+    K = np.empty((NE, 3))
+    dx = np.empty(NE)
+    estimate = cfg[C_ROUTE_EST] > 0 and aux[A_ROUTE_EST] > 0
+    _apply_gain(x, P, y, 2, PHt, Si, cfg[C_SCALE_ON] > 0, K, dx, E_LANE if estimate else NE)
+    if estimate:
+        for k in range(3):
+            aux[A_ROUTE + k] += dx[E_LANE + k]
     aux[A_INFLATE] = 1.0
     return np.array([y[0], y[1], x[X_POS] - p0, x[X_POS + 1] - p1])
 
@@ -365,7 +388,7 @@ def set_map_bias(P: F64, aux: F64, cfg: F64, cov: F64) -> None:
 
 
 @kernel
-def clone_route_errors(P: F64, aux: F64, cfg: F64, gain: F64, cov: F64) -> None:
+def clone_route_errors(P: F64, aux: F64, cfg: F64, gain: F64, cov: F64, estimate: bool) -> None:
     """Start an outage's lane-offset and map-bias errors (``E_LANE``, ``E_MAP``) as ``gain``
     (3, 2) times the E/N position error plus an independent part of covariance ``cov`` (3, 3).
 
@@ -374,8 +397,13 @@ def clone_route_errors(P: F64, aux: F64, cfg: F64, gain: F64, cov: F64) -> None:
     (the receiver's slow wander) through the fit's gain, and every pseudo-position of the outage
     shares it: cloned from the position error, consecutive matches hold the estimate to the road
     while its absolute variance stays what GNSS left (:func:`clone_lane_offset` is the case of
-    a lane offset alone)."""
+    a lane offset alone). ``estimate``: the outage's pseudo-positions estimate these errors
+    (where the road turns, the dead-reckoned shape tells a map shifted sideways from a lane
+    kept), accumulated in ``aux[A_ROUTE:]``; else they are only considered."""
     flush_covariance(P, aux, cfg)
+    for k in range(3):
+        aux[A_ROUTE + k] = 0.0
+    aux[A_ROUTE_EST] = 1.0 if estimate else 0.0
     rows = np.empty((3, NE))
     for k in range(3):
         for j in range(NE):

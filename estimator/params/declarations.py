@@ -306,12 +306,18 @@ class OffsetParams:
         step=0.1,
     )
     map_bias_min_sigmas: float = param(
-        2.5,
+        3.0,
         "a bias whose chi-square against zero (2 dof, its full covariance) is below this "
         "squared is not applied",
         lo=0,
         hi=10,
         step=0.1,
+    )
+    map_bias_estimated: bool = param(
+        True,
+        "the route pseudo-positions of an outage also estimate the learned lane offset's and "
+        "map bias's errors (a bend tells a sideways map shift from a lane; else they are only "
+        "considered)",
     )
     map_bias_max_residual_m: float = param(
         3.0,

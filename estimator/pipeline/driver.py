@@ -36,6 +36,7 @@ from estimator.filter.layout import (
     A_DIST,
     A_DR,
     A_NEXT_OUT,
+    A_ROUTE,
     A_TIME,
     A_USED_DIST,
     C_OUT_DT,
@@ -205,6 +206,8 @@ class _Track:
     """the map bias of the current interval (``extensions.map_bias``)"""
     biased_route: Route | None = None
     """the route moved back by ``bias``: where the road driven is"""
+    biased_key: tuple[float, float] = (0.0, 0.0)
+    """the offset ``biased_route`` was moved back by"""
 
 
 class Driver:
@@ -282,7 +285,7 @@ class Driver:
                     gain, cov = bias.gain.copy(), bias.cov.copy()
                     if not self.p.extensions.lane_offset_state:
                         gain[0], cov[0], cov[:, 0] = 0.0, 0.0, 0.0
-                    clone_route_errors(f.P, f.aux, self.inp.cfg, gain, cov)
+                    clone_route_errors(f.P, f.aux, self.inp.cfg, gain, cov, bias.significant)
                 elif self.p.extensions.lane_offset_state and self.track.s is not None:
                     t = self.route.tangent_at(self.track.s)[0]
                     clone_lane_offset(f.P, f.aux, self.inp.cfg, np.array([-t[1], t[0]]))
@@ -359,9 +362,6 @@ class Driver:
         if self.p.extensions.map_bias:
             tr.bias = self._learn_bias(rows, last, s_last)
             tr.lane = tr.bias.lane
-            tr.biased_route = Route(
-                self.route.xy - tr.bias.offset, name=self.route.name, source=self.route.source
-            )
 
     def _learn_bias(self, rows: F64, last: NDArray[np.intp], s_last: float) -> MapBias:
         """The map bias from the estimate over the last ``offset.map_bias_track_m`` of travel
@@ -452,14 +452,23 @@ class Driver:
         w = self.p.window
 
         def attempt(window_xy: F64, params: Params) -> MatchRecord:
-            geometry = self._geometry(window_xy, x[:2].copy(), position_on_map_cov(P), pred, params)
+            geometry = self._geometry(
+                window_xy, x[:2].copy(), position_on_map_cov(P), pred, params, aux
+            )
             rec = judge_match(
                 geometry, params, index=len(self.records), t=float(aux[A_TIME]), epoch=n_out
             )
             bias = self.track.bias
             if bias is None:
                 return rec
-            used = MapBiasUse(bias.offset, P[E_MAP:, E_MAP:].copy(), bias.along_observed)
+            offset, _ = self._route_estimate(aux)
+            used = MapBiasUse(
+                offset,
+                P[E_MAP:, E_MAP:].copy(),
+                bias.along_observed,
+                learned=bias.measured,
+                chi2=bias.chi2,
+            )
             return dataclasses.replace(rec, map_bias=used)
 
         rec = attempt(self._window(out, n_out, x, aux, w.length_m), self.p)
@@ -497,18 +506,27 @@ class Driver:
         cov: F64,
         pred: float | None,
         params: Params,
+        aux: F64,
     ) -> MatchGeometry:
         """:func:`match_geometry` of an attempt, or the previous run's for the same inputs
         (window, position, covariance, route guess, lane offset, map bias and the parameters
         the geometry depends on): after a gate change the attempts before the first changed
         outcome are only re-judged, not fitted again.
 
-        With a map bias the window is matched to the route moved back by it."""
+        With a map bias the window is matched to the route moved back by it, and to the lane
+        it learned, both as the outage's matches have corrected them (:meth:`_route_estimate`)."""
         tr = self.track
         lane, route = tr.lane, self.route
         bias_key: tuple[float, ...] = ()
-        if tr.bias is not None and tr.biased_route is not None:
-            route, bias_key = tr.biased_route, tuple(map(float, tr.bias.offset))
+        if tr.bias is not None:
+            offset, lane = self._route_estimate(aux)
+            key = (float(offset[0]), float(offset[1]))
+            if tr.biased_route is None or tr.biased_key != key:
+                tr.biased_route = Route(
+                    self.route.xy - offset, name=self.route.name, source=self.route.source
+                )
+                tr.biased_key = key
+            route, bias_key = tr.biased_route, key
         return self.memo.get(
             ("geometry", pred, lane, bias_key, geometry_params(params)),
             (window_xy, p_dr, cov),
@@ -516,6 +534,15 @@ class Driver:
                 window_xy, p_dr, cov, route, s_guess=pred, lane_offset=lane, params=params
             ),
         )
+
+    def _route_estimate(self, aux: F64) -> tuple[F64, float]:
+        """The map bias and the lane offset of the current interval: as learned before the
+        outage plus what its matches estimated of their errors since (the filter's
+        ``A_ROUTE``, ``offset.map_bias_estimated``)."""
+        bias = self.track.bias
+        assert bias is not None
+        offset: F64 = bias.offset + aux[A_ROUTE + 1 : A_ROUTE + 3]
+        return offset, bias.lane + float(aux[A_ROUTE])
 
     def after_match(self, rec: MatchRecord, x_after: F64, aux: F64) -> None:
         """Follow the vehicle along the route after an accepted match."""
