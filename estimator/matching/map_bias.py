@@ -16,8 +16,12 @@ The lane follows the road's normal, the map's shift does not: where the track tu
 cross-track distances tell them apart and fix ``b`` along the road too; on a straight approach
 only ``l - n . b`` is seen, and the priors (``offset.map_bias_lane_sigma_m`` for the lane,
 ``offset.map_bias_prior_sigma_m`` along and ``offset.map_bias_cross_sigma_m`` across for the
-map) share it out, with the covariance saying that the share is unknown. A least-squares fit
-with those priors gives ``u = [l, b]`` and its covariance.
+map) share it out, with the covariance saying that the share is unknown. A map drawn rotated by
+a small angle ``a`` about the end of the track ``x_e`` is shifted by ``b + a J (x - x_e)``
+(``J`` a quarter turn), which a straight approach sees as a route at an angle to the track:
+with the prior ``offset.map_bias_rotation_sigma_deg`` it is a fourth unknown. The shape's own
+along-track registration (the matcher's rigid fit) adds ``t . b`` where the track turns. A
+least-squares fit with those priors gives ``u = [l, b, a]`` and its covariance.
 
 The errors ``e_i`` have two parts. The estimate's own error at the end of the track (the
 receiver's slow wander) is common to the whole track; it enters ``u`` through a gain ``G``
@@ -28,15 +32,19 @@ pseudo-positions then hold the estimate to the road without claiming to know it 
 GNSS did. The rest (map shape, lane keeping) is noise of ``pseudo.shape_noise_m`` per
 ``window.length_m`` of track, independent of the state.
 
-The bias is used only when a chi-square test of ``b`` against zero, with its full covariance,
-exceeds ``offset.map_bias_min_sigmas`` squared: a right map then keeps the lane offset learned
-near the portal and no bias, and the filter only carries ``offset.map_bias_null_sigma_m`` of
-map error (a map no test can tell from right is not known to be right). Otherwise the route is
-moved back by ``b`` for every match of the outage and ``l`` is its lane offset.
+The bias is used only when a chi-square test of ``b`` (or of ``a``) against zero, with its full
+covariance, exceeds ``offset.map_bias_min_sigmas`` squared: a right map then keeps the lane
+offset learned near the portal and no bias, and the filter only carries
+``offset.map_bias_null_sigma_m`` of map error. Otherwise the route is moved back by the bias
+for every match of the outage and ``l`` is its lane offset; the rotation's remaining
+uncertainty grows the map-bias error with the distance from ``x_e``. A bias further from zero
+than ``offset.map_bias_max_prior_sigmas`` of its prior is not a map's error but another road
+(a parallel carriageway): nothing is learned, and the matcher's gates judge the route as it is.
 """
 
 from __future__ import annotations
 
+import dataclasses
 import math
 from dataclasses import dataclass
 
@@ -52,10 +60,18 @@ F64 = NDArray[np.float64]
 
 @dataclass(frozen=True)
 class MapBias:
-    """The route's bias learned before an outage: route position minus road position."""
+    """The route's bias learned before an outage: route position minus road position, at
+    ``pivot`` plus the rotation ``rotation`` about it."""
 
     offset: F64
-    """(2,) E, N: the route lies ``offset`` from the road driven, m (zero unless significant)"""
+    """(2,) E, N: the route lies ``offset`` from the road driven at ``pivot``, m (zero unless
+    significant)"""
+    rotation: float
+    """the route is drawn turned by this about ``pivot`` (counter-clockwise), rad"""
+    rotation_sigma: float
+    """its 1-sigma, rad"""
+    pivot: F64
+    """(2,) E, N: the end of the track it was learned from"""
     lane: float
     """the lane offset to keep with it (positive = vehicle left of the road), m"""
     gain: F64
@@ -64,59 +80,100 @@ class MapBias:
     cov: F64
     """(3, 3) covariance of the lane-offset and map-bias (E, N) errors beyond ``gain``'s part"""
     measured: F64
-    """(2,) the fit's estimate of the map's bias before the significance test, m (NaN when
-    nothing was learned)"""
+    """(2,) the fit's estimate of the map's bias at ``pivot`` before the significance test, m
+    (NaN when nothing was learned)"""
     measured_cov: F64
     """(2, 2) its covariance, the part shared with the position error included, m^2"""
     chi2: float
     """``measured`` against zero (NaN when nothing was learned)"""
     along_observed: bool
-    """the track's turns fixed the along-track bias to better than half its prior"""
+    """the track fixed the along-track bias to better than half its prior"""
 
     @property
     def significant(self) -> bool:
         """The bias was applied (it differs from zero by more than the test allows)."""
-        return bool(np.any(self.offset != 0.0))
+        return bool(np.any(self.offset != 0.0) or self.rotation != 0.0)
 
-    @property
-    def bias_cov(self) -> F64:
-        """(2, 2) the map-bias error's covariance at the outage start, for a position error of
-        zero (the part not shared with it), m^2."""
-        out: F64 = self.cov[1:, 1:]
+    def moved_back(self, xy: F64, offset: F64) -> F64:
+        """Route vertices ``xy`` (N, 2) moved back onto the road: by ``offset`` (the bias at
+        ``pivot``, as the outage's matches have corrected it) and the rotation about it."""
+        d = xy - self.pivot
+        out: F64 = xy - offset - self.rotation * np.column_stack([-d[:, 1], d[:, 0]])
         return out
 
 
-def prior_bias(params: Params, *, lane: float, normal: F64) -> MapBias:
-    """Nothing learned: the lane offset ``lane`` learned near the portal (its error the position
-    error across ``normal``), zero bias with the prior covariance."""
-    op = params.offset
-    t = np.array([normal[1], -normal[0]])
+def _result(
+    lane: float,
+    normal: F64,
+    map_cov: F64,
+    *,
+    measured: F64 | None = None,
+    measured_cov: F64 | None = None,
+    chi2: float = math.nan,
+    along_observed: bool = False,
+    pivot: F64 | None = None,
+) -> MapBias:
+    """No bias applied: the lane offset ``lane`` learned near the portal (its error the
+    position error across ``normal``), the map-bias error of covariance ``map_cov``."""
     cov = np.zeros((3, 3))
-    cov[1:, 1:] = op.map_bias_prior_sigma_m**2 * np.outer(t, t)
-    cov[1:, 1:] += op.map_bias_cross_sigma_m**2 * np.outer(normal, normal)
+    cov[1:, 1:] = map_cov
     gain = np.zeros((3, 2))
     gain[0] = normal
     return MapBias(
         offset=np.zeros(2),
+        rotation=0.0,
+        rotation_sigma=0.0,
+        pivot=np.zeros(2) if pivot is None else pivot,
         lane=lane,
         gain=gain,
         cov=cov,
-        measured=np.full(2, np.nan),
-        measured_cov=np.full((2, 2), np.nan),
-        chi2=math.nan,
-        along_observed=False,
+        measured=np.full(2, np.nan) if measured is None else measured,
+        measured_cov=np.full((2, 2), np.nan) if measured_cov is None else measured_cov,
+        chi2=chi2,
+        along_observed=along_observed,
     )
 
 
-def _thin(xy: F64, spacing: float) -> F64:
-    """The points of ``xy`` at least ``spacing`` apart along it, the last kept."""
+def _prior_cov(params: Params, normal: F64) -> F64:
+    """(2, 2) the map bias's prior covariance where the road's left normal is ``normal``."""
+    op = params.offset
+    t = np.array([normal[1], -normal[0]])
+    out: F64 = op.map_bias_prior_sigma_m**2 * np.outer(t, t)
+    out += op.map_bias_cross_sigma_m**2 * np.outer(normal, normal)
+    return out
+
+
+def prior_bias(params: Params, *, lane: float, normal: F64) -> MapBias:
+    """Nothing learned (no GNSS-good track): the lane offset ``lane`` learned near the portal,
+    zero bias with the prior covariance (``normal``: the route's left normal there)."""
+    return _result(lane, normal, _prior_cov(params, normal))
+
+
+def unbiased(params: Params, *, lane: float, normal: F64, learned: MapBias) -> MapBias:
+    """The previous outage's finding that the map is right (``learned``), carried to the next
+    one with the lane offset ``lane`` learned near its portal (``normal``: the route's left
+    normal there)."""
+    null = params.offset.map_bias_null_sigma_m**2 * np.eye(2)
+    return _result(
+        lane,
+        normal,
+        null,
+        measured=learned.measured,
+        measured_cov=learned.measured_cov,
+        chi2=learned.chi2,
+        along_observed=learned.along_observed,
+        pivot=learned.pivot,
+    )
+
+
+def _thin(xy: F64, spacing: float) -> NDArray[np.intp]:
+    """Indices of the points of ``xy`` at least ``spacing`` apart along it, the last kept."""
     step = np.hypot(*np.diff(xy, axis=0).T)
     back = np.concatenate([np.cumsum(step[::-1])[::-1], [0.0]])
-    keep = np.unique(np.floor(back / spacing), return_index=True)[1]
-    out: F64 = xy[np.sort(keep)]
-    if not np.array_equal(out[-1], xy[-1]):
-        out = np.vstack([out, xy[-1:]])
-    return out
+    keep = np.sort(np.unique(np.floor(back / spacing), return_index=True)[1])
+    if keep[-1] != len(xy) - 1:
+        keep = np.append(keep, len(xy) - 1)
+    return keep
 
 
 def _along_by_shape(
@@ -138,6 +195,16 @@ def _along_by_shape(
     return float(t @ (fit.z - xy[-1])), t, float(t @ fit.obs_cov @ t)
 
 
+def _solve(A: F64, d: F64, weights: F64, P0: F64, nrm: F64) -> tuple[F64, F64, F64]:
+    """The weighted least-squares ``u = K d`` with the zero-mean prior ``P0``, its covariance
+    with the independent noise, and the gain ``G = K N`` of the track's common error: ``d``
+    holds ``n_i . (estimate - truth)``, so u's error is ``K N eps``; the filter's states are
+    the negative of u's error and its position error is truth - estimate, hence ``G``."""
+    C = np.linalg.inv(A.T @ (weights[:, None] * A) + np.linalg.inv(P0))
+    K = C @ (A * weights[:, None]).T
+    return K @ d, C, K @ nrm
+
+
 def learn_map_bias(
     track_xy: F64,
     track_cov: F64,
@@ -146,13 +213,15 @@ def learn_map_bias(
     s_guess: float | None,
     lane_offset: float,
     params: Params,
+    track_var: F64 | None = None,
 ) -> MapBias:
     """The map bias from ``track_xy`` (N, 2), the GNSS-good estimate over the last
     ``offset.map_bias_track_m`` in time order, ending at the vehicle; ``track_cov`` its E/N
-    covariance at the end; ``s_guess`` the route arc length of the end; ``lane_offset`` the
-    lane offset learned near the end (kept when the bias is not significant). A track that
-    does not follow the route (residual above ``offset.map_bias_max_residual_m``) learns
-    nothing."""
+    covariance at the end; ``track_var`` (N,) the estimate's horizontal variance per point
+    (a point less certain than the end weighs less); ``s_guess`` the route arc length of the
+    end; ``lane_offset`` the lane offset learned near the end (kept when the bias is not
+    significant). A track that does not follow the route (residual above
+    ``offset.map_bias_max_residual_m``) learns nothing."""
     op = params.offset
     xy = np.asarray(track_xy, np.float64)[:, :2]
     end_s = route.project(xy[-1:]).s[0] if s_guess is None else float(s_guess)
@@ -160,7 +229,8 @@ def learn_map_bias(
     prior = prior_bias(params, lane=lane_offset, normal=normal_end)
     if len(xy) < 2:
         return prior
-    pts = _thin(xy, params.window.spacing_m)
+    keep = _thin(xy, params.window.spacing_m)
+    pts = xy[keep]
     step = np.hypot(*np.diff(pts, axis=0).T)
     back = np.concatenate([np.cumsum(step[::-1])[::-1], [0.0]])
     proj = route.project(pts, end_s - back, params.window.route_search_m)
@@ -168,63 +238,101 @@ def learn_map_bias(
     span = float(back[0])
     if np.count_nonzero(inside) < 5 or span < params.window.length_m:
         return prior
+    end = xy[-1]
     d = proj.lateral[inside]
     nrm = route.normal_at(proj.s[inside])
-    A = np.column_stack([np.ones(len(d)), -nrm])
+    rel = pts[inside] - end
+    turned = np.column_stack([-rel[:, 1], rel[:, 0]])  # J (x - x_e)
+    A = np.column_stack([np.ones(len(d)), -nrm, -np.sum(nrm * turned, axis=1)])
     # the map's shape and the lane keeping err together over a window's length
     n_eff = max(span / params.window.length_m, 1.0)
-    weights = np.full(len(d), n_eff / (len(d) * params.pseudo.shape_noise_m**2))
+    var = np.full(len(d), len(d) * params.pseudo.shape_noise_m**2 / n_eff)
+    if track_var is not None:
+        v = np.asarray(track_var, np.float64)[keep][inside]
+        var += np.maximum(v - 0.5 * float(np.trace(track_cov)), 0.0)
+    weights = 1.0 / var
+    n_lateral = len(d)
     along = _along_by_shape(xy, track_cov, route, s_guess=end_s, lane=lane_offset, params=params)
     if along is not None:
         # the shape's along-track registration: t . b = y, the track's common error entering
         # as -t . eps
-        y, tangent, var = along
-        A = np.vstack([A, np.concatenate([[0.0], tangent])])
+        y, tangent, along_var = along
+        A = np.vstack([A, np.concatenate([[0.0], tangent, [0.0]])])
         d = np.append(d, y)
         nrm = np.vstack([nrm, -tangent])
-        weights = np.append(weights, 1.0 / var)
-    t_end = np.array([normal_end[1], -normal_end[0]])
-    P0 = np.zeros((3, 3))
+        weights = np.append(weights, 1.0 / along_var)
+    P0 = np.zeros((4, 4))
     P0[0, 0] = op.map_bias_lane_sigma_m**2
-    P0[1:, 1:] = op.map_bias_prior_sigma_m**2 * np.outer(t_end, t_end)
-    P0[1:, 1:] += op.map_bias_cross_sigma_m**2 * np.outer(normal_end, normal_end)
-    info = A.T @ (weights[:, None] * A) + np.linalg.inv(P0)
-    C = np.linalg.inv(info)  # posterior covariance with the independent noise
-    K = C @ (A * weights[:, None]).T  # u = K d (zero prior mean)
-    u = K @ d
-    lateral = A[: len(inside.nonzero()[0])]
-    residual = float(np.sqrt(np.mean((d[: len(lateral)] - lateral @ u) ** 2)))
+    P0[1:3, 1:3] = _prior_cov(params, normal_end)
+    P0[3, 3] = math.radians(op.map_bias_rotation_sigma_deg) ** 2
+    u, C, G = _solve(A, d, weights, P0, nrm)
+    residual = float(np.sqrt(np.mean((d[:n_lateral] - A[:n_lateral] @ u) ** 2)))
     if not np.isfinite(residual) or residual > op.map_bias_max_residual_m:
         return prior
-    # d_i holds n_i . (estimate - truth): u's error is K N eps; the state is the negative of
-    # u's error, and the position error state is truth - estimate, hence G = K N
-    G = K @ nrm
-    b, Cb = u[1:], C[1:, 1:] + G[1:] @ track_cov @ G[1:].T
+    total = C + G @ track_cov @ G.T
+    rotated = u[3] ** 2 / total[3, 3] >= op.map_bias_min_sigmas**2
+    if not rotated:
+        # a rotation no test tells from zero is not applied, nor does its sigma, extrapolated
+        # from the approach into a long tunnel, swamp the bias learned at the portal
+        u3, C3, G3 = _solve(A[:, :3], d, weights, P0[:3, :3], nrm)
+        u, C, G = np.append(u3, 0.0), np.zeros((4, 4)), np.zeros((4, 2))
+        C[:3, :3], G[:3] = C3, G3
+        total = C + G @ track_cov @ G.T
+    b, Cb = u[1:3], total[1:3, 1:3]
     chi2 = float(b @ np.linalg.solve(Cb, b))
-    along_sigma = math.sqrt(float(t_end @ C[1:, 1:] @ t_end))
-    along_observed = along_sigma < 0.5 * op.map_bias_prior_sigma_m
-    if chi2 < op.map_bias_min_sigmas**2:
-        null = np.zeros((3, 3))
-        null[1:, 1:] = op.map_bias_null_sigma_m**2 * np.eye(2)
-        gain = np.zeros((3, 2))
-        gain[0] = normal_end
-        return MapBias(
-            offset=np.zeros(2),
-            lane=lane_offset,
-            gain=gain,
-            cov=null,
-            measured=b,
-            measured_cov=Cb,
-            chi2=chi2,
-            along_observed=along_observed,
-        )
+    t_end = np.array([normal_end[1], -normal_end[0]])
+    along_observed = math.sqrt(float(t_end @ C[1:3, 1:3] @ t_end)) < 0.5 * op.map_bias_prior_sigma_m
+    learned = {"measured": b, "measured_cov": Cb, "chi2": chi2, "along_observed": along_observed}
+    if float(b @ np.linalg.solve(P0[1:3, 1:3], b)) > op.map_bias_max_prior_sigmas**2:
+        return _result(lane_offset, normal_end, np.zeros((2, 2)), pivot=end, **learned)
+    if chi2 < op.map_bias_min_sigmas**2 and not rotated:
+        null = op.map_bias_null_sigma_m**2 * np.eye(2)
+        return _result(lane_offset, normal_end, null, pivot=end, **learned)
     return MapBias(
         offset=b,
+        rotation=float(u[3]),
+        rotation_sigma=math.sqrt(float(C[3, 3])),
+        pivot=end,
         lane=float(u[0]),
-        gain=G,
-        cov=C,
+        gain=G[:3],
+        cov=C[:3, :3],
         measured=b,
         measured_cov=Cb,
         chi2=chi2,
         along_observed=along_observed,
+    )
+
+
+def carried_bias(
+    previous: MapBias,
+    offset: F64,
+    *,
+    position: F64,
+    lane_seen: float,
+    normal: F64,
+    metres: float,
+    params: Params,
+) -> MapBias:
+    """The bias of the previous outage, ``offset`` at its pivot as that outage's matches left
+    it, carried to the next outage ``metres`` further along where the driving in between was
+    too short to learn one: the map's bias there is the same one, wandered and turned a little
+    further (``offset.map_bias_walk_m_per_sqrt_km``, the rotation's sigma). ``lane_seen``: the
+    cross-track offset from the route learned near the portal (lane and map together), at
+    ``position`` where the route's left normal is ``normal``. The bias's error is no longer
+    the position's (GNSS has since corrected the position), so it is carried independent."""
+    op = params.offset
+    d = position - previous.pivot
+    here = offset + previous.rotation * np.array([-d[1], d[0]])
+    grow = op.map_bias_walk_m_per_sqrt_km**2 * metres / 1000.0
+    grow += previous.rotation_sigma**2 * float(d @ d)
+    cov = np.zeros((3, 3))
+    cov[1:, 1:] = previous.measured_cov + grow * np.eye(2)
+    gain = np.zeros((3, 2))
+    gain[0] = normal
+    return dataclasses.replace(
+        previous,
+        offset=offset,
+        lane=float(lane_seen + normal @ here),
+        gain=gain,
+        cov=cov,
     )

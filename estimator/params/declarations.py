@@ -270,7 +270,7 @@ class OffsetParams:
         step=0.5,
     )
     map_bias_walk_m_per_sqrt_km: float = param(
-        1.0,
+        0.5,
         "random walk of the map's bias along the road: its 1-sigma grows by this after 1 km",
         unit="m/sqrt(km)",
         lo=0,
@@ -293,6 +293,23 @@ class OffsetParams:
         "a sideways map shift from being taken for a lane the vehicle keeps through bends)",
         unit="m",
         lo=0.1,
+        hi=20,
+        step=0.1,
+    )
+    map_bias_rotation_sigma_deg: float = param(
+        1.0,
+        "1-sigma of the map's rotation before it is learned (a map drawn turned about the "
+        "portal is shifted more the further into the tunnel)",
+        unit="deg",
+        lo=0.01,
+        hi=20,
+        step=0.1,
+    )
+    map_bias_max_prior_sigmas: float = param(
+        3.0,
+        "a bias further from zero than this many of its prior sigmas is not a map's error but "
+        "another road: nothing is learned",
+        lo=0.5,
         hi=20,
         step=0.1,
     )

@@ -65,7 +65,13 @@ from estimator.matching import (
     route_arc_length,
 )
 from estimator.matching.kernels import max_turn_deg, search_right, track_window
-from estimator.matching.map_bias import MapBias, learn_map_bias, prior_bias
+from estimator.matching.map_bias import (
+    MapBias,
+    carried_bias,
+    learn_map_bias,
+    prior_bias,
+    unbiased,
+)
 from estimator.matching.reanchor import should_reanchor, within_drift
 from estimator.nav.frames import LocalFrame
 from estimator.params import Method, Params, for_method
@@ -208,6 +214,8 @@ class _Track:
     """the route moved back by ``bias``: where the road driven is"""
     biased_key: tuple[float, float] = (0.0, 0.0)
     """the offset ``biased_route`` was moved back by"""
+    pivot_dist: float = 0.0
+    """distance travelled at the end of the track the bias was learned from"""
 
 
 class Driver:
@@ -299,16 +307,28 @@ class Driver:
                 d = float(f.aux[A_DIST])
                 if d - dist_a >= tr.min_outage_distance_m and d - dist_last >= spacing:
                     if not redo:
-                        if self.track.bias is not None:
-                            walk = self.p.offset.map_bias_walk_m_per_sqrt_km
-                            moved = d - (dist_last if dist_last > -math.inf else dist_a)
-                            grow_map_bias(f.P, walk**2 * moved / 1000.0)
+                        if self.track.bias is not None and self.track.bias.significant:
+                            grow_map_bias(f.P, self._bias_growth(d, dist_last, dist_a))
                         self._checkpoint("attempt", i, k, dist_a, dist_last)
                     self._attempt_live()
                     dist_last = d
                 k += 1
             at = None
         f.advance(math.inf)
+
+    def _bias_growth(self, d: float, dist_last: float, dist_a: float) -> float:
+        """Variance (m^2, per axis) an applied map bias's error gains from the previous attempt
+        (or the outage start) to travelled distance ``d``: the map's error wandering along the
+        road (``offset.map_bias_walk_m_per_sqrt_km``), and the learned rotation's uncertainty
+        carried further from where it was learned. A bias tested insignificant keeps
+        ``offset.map_bias_null_sigma_m``."""
+        bias = self.track.bias
+        assert bias is not None
+        before = dist_last if dist_last > -math.inf else dist_a
+        walk = self.p.offset.map_bias_walk_m_per_sqrt_km
+        far, near = d - self.track.pivot_dist, before - self.track.pivot_dist
+        turn = bias.rotation_sigma**2 * (far * far - near * near)
+        return float(walk**2 * (d - before) / 1000.0 + max(turn, 0.0))
 
     def _checkpoint(
         self,
@@ -358,9 +378,29 @@ class Driver:
             s_guess=s_last,
         )
         tr.t_start = t_a
+        previous = None
+        if tr.bias is not None and np.isfinite(tr.bias.chi2):
+            previous = (tr.bias, self._route_estimate(aux)[0], tr.pivot_dist)
         tr.bias, tr.biased_route = None, None
         if self.p.extensions.map_bias:
             tr.bias = self._learn_bias(rows, last, s_last)
+            if previous is not None and not np.isfinite(tr.bias.chi2):
+                # too little driving since the previous outage to learn: its bias still holds
+                bias, offset, pivot_dist = previous
+                normal = self.route.normal_at(np.array([tr.s]))[0]
+                if bias.significant:
+                    tr.pivot_dist = pivot_dist
+                    tr.bias = carried_bias(
+                        bias,
+                        offset,
+                        position=x[:2].copy(),
+                        lane_seen=tr.lane,
+                        normal=normal,
+                        metres=float(aux[A_DIST]) - pivot_dist,
+                        params=self.p,
+                    )
+                else:
+                    tr.bias = unbiased(self.p, lane=tr.lane, normal=normal, learned=bias)
             tr.lane = tr.bias.lane
 
     def _learn_bias(self, rows: F64, last: NDArray[np.intp], s_last: float) -> MapBias:
@@ -373,10 +413,17 @@ class Driver:
         end = int(last[-1])
         d = rows[: end + 1, O_DIST]
         i0 = int(search_right(d, float(d[end]) - self.p.offset.map_bias_track_m))
+        # only driving under GNSS, once the estimate has settled on it again: the previous
+        # outage's dead reckoning, and the pull back from it, are not the road
+        ends = [b for _, b in self.inp.degraded if b <= rows[end, O_T]]
+        if ends:
+            settled = ends[-1] + self.p.noise.gnss_rerun_lag_s
+            i0 = max(i0, int(np.searchsorted(rows[: end + 1, O_T], settled, side="right")))
         track = rows[i0 : end + 1]
         if np.count_nonzero(track[:, O_GNSS] > 0) < 5:
             return prior
         sig = track[-1, O_SIG_POS : O_SIG_POS + 2]
+        self.track.pivot_dist = float(d[end])
         return learn_map_bias(
             track[:, O_POS : O_POS + 2],
             np.diag(sig**2),
@@ -384,6 +431,7 @@ class Driver:
             s_guess=s_last,
             lane_offset=self.track.lane,
             params=self.p,
+            track_var=0.5 * np.sum(track[:, O_SIG_POS : O_SIG_POS + 2] ** 2, axis=1),
         )
 
     def _window(self, out: F64, n_out: int, x: F64, aux: F64, length_m: float) -> F64:
@@ -523,7 +571,9 @@ class Driver:
             key = (float(offset[0]), float(offset[1]))
             if tr.biased_route is None or tr.biased_key != key:
                 tr.biased_route = Route(
-                    self.route.xy - offset, name=self.route.name, source=self.route.source
+                    tr.bias.moved_back(self.route.xy, offset),
+                    name=self.route.name,
+                    source=self.route.source,
                 )
                 tr.biased_key = key
             route, bias_key = tr.biased_route, key
