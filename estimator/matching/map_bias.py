@@ -282,12 +282,23 @@ def learn_map_bias(
     chi2 = float(b @ np.linalg.solve(Cb, b))
     t_end = np.array([normal_end[1], -normal_end[0]])
     along_observed = math.sqrt(float(t_end @ C[1:3, 1:3] @ t_end)) < 0.5 * op.map_bias_prior_sigma_m
-    learned = {"measured": b, "measured_cov": Cb, "chi2": chi2, "along_observed": along_observed}
     if float(b @ np.linalg.solve(P0[1:3, 1:3], b)) > op.map_bias_max_prior_sigmas**2:
-        return _result(lane_offset, normal_end, np.zeros((2, 2)), pivot=end, **learned)
-    if chi2 < op.map_bias_min_sigmas**2 and not rotated:
-        null = op.map_bias_null_sigma_m**2 * np.eye(2)
-        return _result(lane_offset, normal_end, null, pivot=end, **learned)
+        map_cov = np.zeros((2, 2))
+    elif chi2 < op.map_bias_min_sigmas**2 and not rotated:
+        map_cov = op.map_bias_null_sigma_m**2 * np.eye(2)
+    else:
+        map_cov = None
+    if map_cov is not None:
+        return _result(
+            lane_offset,
+            normal_end,
+            map_cov,
+            measured=b,
+            measured_cov=Cb,
+            chi2=chi2,
+            along_observed=along_observed,
+            pivot=end,
+        )
     return MapBias(
         offset=b,
         rotation=float(u[3]),
