@@ -320,7 +320,7 @@ def pseudo_position_update(
 
     The truth is ``z + normal * (lane-offset error) - (map-bias error) + noise`` (``normal``:
     the route's left normal at the match; zero leaves the lane-offset error out; the map-bias
-    error is zero unless :func:`set_map_bias` gave it a covariance)."""
+    error is zero unless :func:`clone_route_errors` gave it a covariance)."""
     flush_covariance(P, aux, cfg)
     H = np.zeros((3, NE))
     R = np.zeros((3, 3))
@@ -369,25 +369,6 @@ def clone_lane_offset(P: F64, aux: F64, cfg: F64, normal: F64) -> None:
 
 
 @kernel
-def set_map_bias(P: F64, aux: F64, cfg: F64, cov: F64) -> None:
-    """Start an outage's map-bias error with the covariance ``cov`` (2, 2) of the bias learned
-    before it (:mod:`estimator.matching.map_bias`), uncorrelated with the rest of the state.
-
-    Every pseudo-position of the outage comes from the same map, moved back by the same
-    estimated bias, so all of them share its error: carried as a considered state, consecutive
-    matches still tie the estimate to the route's shape while the absolute position never
-    claims to be better known than the map's bias."""
-    flush_covariance(P, aux, cfg)
-    for i in range(2):
-        for j in range(NE):
-            P[E_MAP + i, j] = 0.0
-            P[j, E_MAP + i] = 0.0
-    for i in range(2):
-        for j in range(2):
-            P[E_MAP + i, E_MAP + j] = cov[i, j]
-
-
-@kernel
 def clone_route_errors(P: F64, aux: F64, cfg: F64, gain: F64, cov: F64, estimate: bool) -> None:
     """Start an outage's lane-offset and map-bias errors (``E_LANE``, ``E_MAP``) as ``gain``
     (3, 2) times the E/N position error plus an independent part of covariance ``cov`` (3, 3).
@@ -414,9 +395,10 @@ def clone_route_errors(P: F64, aux: F64, cfg: F64, gain: F64, cov: F64, estimate
                 P[E_LANE + k, j] = rows[k, j]
                 P[j, E_LANE + k] = rows[k, j]
     for k in range(3):
-        for m in range(3):
+        for m in range(k, 3):
             v = gain[m, 0] * rows[k, E_POS] + gain[m, 1] * rows[k, E_POS + 1] + cov[k, m]
             P[E_LANE + k, E_LANE + m] = v
+            P[E_LANE + m, E_LANE + k] = v
 
 
 @kernel

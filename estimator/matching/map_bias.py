@@ -97,9 +97,15 @@ class MapBias:
     def moved_back(self, xy: F64, offset: F64) -> F64:
         """Route vertices ``xy`` (N, 2) moved back onto the road: by ``offset`` (the bias at
         ``pivot``, as the outage's matches have corrected it) and the rotation about it."""
-        d = xy - self.pivot
-        out: F64 = xy - offset - self.rotation * np.column_stack([-d[:, 1], d[:, 0]])
-        return out
+        return xy_moved_back(xy, offset, self.rotation, self.pivot)
+
+
+def xy_moved_back(xy: F64, offset: F64, rotation: float, pivot: F64) -> F64:
+    """Route vertices ``xy`` (N, 2) of a map shifted by ``offset`` at ``pivot`` and turned by
+    ``rotation`` (rad, small) about it, moved back onto the road."""
+    d = xy - pivot
+    out: F64 = xy - offset - rotation * np.column_stack([-d[:, 1], d[:, 0]])
+    return out
 
 
 def _result(
@@ -195,14 +201,17 @@ def _along_by_shape(
     return float(t @ (fit.z - xy[-1])), t, float(t @ fit.obs_cov @ t)
 
 
-def _solve(A: F64, d: F64, weights: F64, P0: F64, nrm: F64) -> tuple[F64, F64, F64]:
-    """The weighted least-squares ``u = K d`` with the zero-mean prior ``P0``, its covariance
-    with the independent noise, and the gain ``G = K N`` of the track's common error: ``d``
-    holds ``n_i . (estimate - truth)``, so u's error is ``K N eps``; the filter's states are
-    the negative of u's error and its position error is truth - estimate, hence ``G``."""
+def _solve(
+    A: F64, d: F64, weights: F64, P0: F64, nrm: F64, prior: F64
+) -> tuple[F64, F64, F64]:
+    """The weighted least-squares ``u = prior + K (d - A prior)`` with the prior ``prior``,
+    ``P0``, its covariance with the independent noise, and the gain ``G = K N`` of the track's
+    common error: ``d`` holds ``n_i . (estimate - truth)``, so u's error is ``K N eps``; the
+    filter's states are the negative of u's error and its position error is truth -
+    estimate, hence ``G``."""
     C = np.linalg.inv(A.T @ (weights[:, None] * A) + np.linalg.inv(P0))
     K = C @ (A * weights[:, None]).T
-    return K @ d, C, K @ nrm
+    return prior + K @ (d - A @ prior), C, K @ nrm
 
 
 def learn_map_bias(
@@ -252,20 +261,25 @@ def learn_map_bias(
         var += np.maximum(v - 0.5 * float(np.trace(track_cov)), 0.0)
     weights = 1.0 / var
     n_lateral = len(d)
-    along = _along_by_shape(xy, track_cov, route, s_guess=end_s, lane=lane_offset, params=params)
-    if along is not None:
-        # the shape's along-track registration: t . b = y, the track's common error entering
-        # as -t . eps
-        y, tangent, along_var = along
-        A = np.vstack([A, np.concatenate([[0.0], tangent, [0.0]])])
-        d = np.append(d, y)
-        nrm = np.vstack([nrm, -tangent])
-        weights = np.append(weights, 1.0 / along_var)
     P0 = np.zeros((4, 4))
     P0[0, 0] = op.map_bias_lane_sigma_m**2
     P0[1:3, 1:3] = _prior_cov(params, normal_end)
     P0[3, 3] = math.radians(op.map_bias_rotation_sigma_deg) ** 2
-    u, C, G = _solve(A, d, weights, P0, nrm)
+    # the shape's along-track registration, to the route moved back by the cross-track fit's
+    # bias and lane (matched to a wrong lane, a bend's arc length is off): t . b = t . b1 + y,
+    # the track's common error entering as -t . eps
+    mean = np.array([op.map_bias_lane_prior_m, 0.0, 0.0, 0.0])
+    u1 = _solve(A, d, weights, P0, nrm, mean)[0]
+    moved = Route(xy_moved_back(route.xy, u1[1:3], float(u1[3]), end))
+    s_moved = float(moved.project(end[None, :], end_s, params.window.route_search_m).s[0])
+    along = _along_by_shape(xy, track_cov, moved, s_guess=s_moved, lane=float(u1[0]), params=params)
+    if along is not None:
+        y, tangent, along_var = along
+        A = np.vstack([A, np.concatenate([[0.0], tangent, [0.0]])])
+        d = np.append(d, y + float(tangent @ u1[1:3]))
+        nrm = np.vstack([nrm, -tangent])
+        weights = np.append(weights, 1.0 / along_var)
+    u, C, G = _solve(A, d, weights, P0, nrm, mean)
     residual = float(np.sqrt(np.mean((d[:n_lateral] - A[:n_lateral] @ u) ** 2)))
     if not np.isfinite(residual) or residual > op.map_bias_max_residual_m:
         return prior
@@ -274,7 +288,7 @@ def learn_map_bias(
     if not rotated:
         # a rotation no test tells from zero is not applied, nor does its sigma, extrapolated
         # from the approach into a long tunnel, swamp the bias learned at the portal
-        u3, C3, G3 = _solve(A[:, :3], d, weights, P0[:3, :3], nrm)
+        u3, C3, G3 = _solve(A[:, :3], d, weights, P0[:3, :3], nrm, mean[:3])
         u, C, G = np.append(u3, 0.0), np.zeros((4, 4)), np.zeros((4, 2))
         C[:3, :3], G[:3] = C3, G3
         total = C + G @ track_cov @ G.T

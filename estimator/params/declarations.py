@@ -287,6 +287,15 @@ class OffsetParams:
         hi=100,
         step=0.1,
     )
+    map_bias_lane_prior_m: float = param(
+        -1.75,
+        "the vehicle's lane offset from the road's centreline expected before it is learned "
+        "(positive = left): half a 3.5 m lane to the right in right-hand traffic",
+        unit="m",
+        lo=-10,
+        hi=10,
+        step=0.05,
+    )
     map_bias_lane_sigma_m: float = param(
         2.0,
         "1-sigma of the vehicle's lane offset from the road's centreline (the prior that keeps "

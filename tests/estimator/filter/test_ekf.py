@@ -126,23 +126,33 @@ def test_pseudo_position_update_is_the_kalman_update(normal):
     assert aux[layout.A_INFLATE] == 1.0
 
 
-def test_the_map_bias_error_starts_uncorrelated_and_grows_as_a_random_walk():
+def test_the_route_errors_start_as_the_position_error_through_the_gain_and_grow():
     rng = np.random.default_rng(7)
     P = _random_cov(rng)
     cfg = _config(rng)
     aux = np.zeros(layout.NA)
+    aux[layout.A_ROUTE : layout.A_ROUTE + 3] = [0.3, -1.0, 2.0]
     before = P.copy()
-    cov = np.array([[9.0, 2.0], [2.0, 4.0]])
-    updates.set_map_bias(P, aux, cfg, cov)
-    bias = slice(layout.E_MAP, layout.E_MAP + 2)
-    np.testing.assert_array_equal(P[bias, bias], cov)
-    np.testing.assert_array_equal(P[bias, : layout.E_MAP], 0.0)
+    gain = rng.standard_normal((3, 2))
+    cov = np.array([[1.0, 0.2, 0.0], [0.2, 9.0, 2.0], [0.0, 2.0, 4.0]])
+    updates.clone_route_errors(P, aux, cfg, gain, cov, True)
+    pos, route = slice(layout.E_POS, layout.E_POS + 2), slice(layout.E_LANE, layout.NE)
+    np.testing.assert_allclose(
+        P[route, : layout.E_LANE], gain @ before[pos, : layout.E_LANE], rtol=1e-12
+    )
+    np.testing.assert_allclose(
+        P[route, route], gain @ before[pos, pos] @ gain.T + cov, rtol=1e-12, atol=1e-12
+    )
     np.testing.assert_array_equal(P, P.T)
     np.testing.assert_array_equal(
-        P[: layout.E_MAP, : layout.E_MAP], before[: layout.E_MAP, : layout.E_MAP]
+        P[: layout.E_LANE, : layout.E_LANE], before[: layout.E_LANE, : layout.E_LANE]
     )
+    np.testing.assert_array_equal(aux[layout.A_ROUTE : layout.A_ROUTE + 3], 0.0)
+    assert aux[layout.A_ROUTE_EST] == 1.0
+    bias = slice(layout.E_MAP, layout.E_MAP + 2)
+    grown = np.diag(P[bias, bias]).copy()
     updates.grow_map_bias(P, 0.5)
-    np.testing.assert_array_equal(np.diag(P[bias, bias]), np.diag(cov) + 0.5)
+    np.testing.assert_array_equal(np.diag(P[bias, bias]), grown + 0.5)
 
 
 def test_the_lane_offset_error_starts_as_the_cross_track_position_error():

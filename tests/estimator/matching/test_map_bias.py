@@ -50,7 +50,7 @@ def test_a_route_drawn_ahead_of_the_road_on_a_bend_is_measured_along_the_road() 
     bias = learn(road, 10.0 * tangent, s_end)
     assert bias.along_observed
     assert float(tangent @ bias.offset) == pytest.approx(10.0, abs=1.5)
-    assert np.sqrt(tangent @ bias.cov @ tangent) < 3.0
+    assert np.sqrt(tangent @ bias.measured_cov @ tangent) < 3.0
 
 
 def test_a_straight_approach_leaves_the_along_track_bias_at_its_prior() -> None:
