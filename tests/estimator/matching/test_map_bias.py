@@ -58,7 +58,7 @@ def test_a_straight_approach_leaves_the_along_track_bias_at_its_prior() -> None:
     bias = learn(road, np.array([10.0, 0.0]), 1500.0)
     assert not bias.along_observed
     assert np.allclose(bias.offset, 0.0)
-    along_sigma = float(np.sqrt(bias.cov[0, 0]))
+    along_sigma = float(np.sqrt(bias.measured_cov[0, 0]))
     assert along_sigma > 0.9 * ON.offset.map_bias_prior_sigma_m
 
 
