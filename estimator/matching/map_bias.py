@@ -38,8 +38,11 @@ offset learned near the portal and no bias, and the filter only carries
 ``offset.map_bias_null_sigma_m`` of map error. Otherwise the route is moved back by the bias
 for every match of the outage and ``l`` is its lane offset; the rotation's remaining
 uncertainty grows the map-bias error with the distance from ``x_e``. A bias further from zero
-than ``offset.map_bias_max_prior_sigmas`` of its prior is not a map's error but another road
-(a parallel carriageway): nothing is learned, and the matcher's gates judge the route as it is.
+than ``offset.map_bias_max_prior_sigmas`` of its prior all along the road ahead (a map drawn
+turned is right somewhere, perhaps in the tunnel, and off most far from there) is not a map's
+error but another road (a parallel carriageway): nothing is learned, and the matcher's gates
+judge the route as it is. So is a lane further than ``offset.max_offset_m`` from the
+centreline.
 """
 
 from __future__ import annotations
@@ -201,9 +204,7 @@ def _along_by_shape(
     return float(t @ (fit.z - xy[-1])), t, float(t @ fit.obs_cov @ t)
 
 
-def _solve(
-    A: F64, d: F64, weights: F64, P0: F64, nrm: F64, prior: F64
-) -> tuple[F64, F64, F64]:
+def _solve(A: F64, d: F64, weights: F64, P0: F64, nrm: F64, prior: F64) -> tuple[F64, F64, F64]:
     """The weighted least-squares ``u = prior + K (d - A prior)`` with the prior ``prior``,
     ``P0``, its covariance with the independent noise, and the gain ``G = K N`` of the track's
     common error: ``d`` holds ``n_i . (estimate - truth)``, so u's error is ``K N eps``; the
@@ -212,6 +213,26 @@ def _solve(
     C = np.linalg.inv(A.T @ (weights[:, None] * A) + np.linalg.inv(P0))
     K = C @ (A * weights[:, None]).T
     return prior + K @ (d - A @ prior), C, K @ nrm
+
+
+def _least_bias_ahead(
+    route: Route, s_end: float, end: F64, offset: F64, rotation: float, params: Params
+) -> float:
+    """The smallest the bias ``offset`` at ``end`` (route arc length ``s_end``), turned by
+    ``rotation`` about it, gets on the next ``offset.map_bias_track_m`` times ten of route, in
+    prior sigmas. A map drawn turned is off most far from where it is right, which may lie
+    in the tunnel ahead; a parallel road is off by as much everywhere."""
+    ahead = np.arange(s_end, min(s_end + 10.0 * params.offset.map_bias_track_m, route.length), 50.0)
+    if len(ahead) == 0:
+        ahead = np.array([s_end])
+    xy = route.point_at(ahead)
+    d = xy - end
+    bias = offset + rotation * np.column_stack([-d[:, 1], d[:, 0]])
+    best = math.inf
+    for k, normal in enumerate(route.normal_at(ahead)):
+        v = bias[k]
+        best = min(best, float(v @ np.linalg.solve(_prior_cov(params, normal), v)))
+    return math.sqrt(best)
 
 
 def learn_map_bias(
@@ -296,7 +317,11 @@ def learn_map_bias(
     chi2 = float(b @ np.linalg.solve(Cb, b))
     t_end = np.array([normal_end[1], -normal_end[0]])
     along_observed = math.sqrt(float(t_end @ C[1:3, 1:3] @ t_end)) < 0.5 * op.map_bias_prior_sigma_m
-    if float(b @ np.linalg.solve(P0[1:3, 1:3], b)) > op.map_bias_max_prior_sigmas**2:
+    if (
+        abs(u[0]) > op.max_offset_m
+        or _least_bias_ahead(route, end_s, end, b, float(u[3]), params)
+        > op.map_bias_max_prior_sigmas
+    ):
         map_cov = np.zeros((2, 2))
     elif chi2 < op.map_bias_min_sigmas**2 and not rotated:
         map_cov = op.map_bias_null_sigma_m**2 * np.eye(2)
