@@ -412,7 +412,7 @@ class ExtensionParams:
         "widen the filter's position and heading covariance to the innovation and accept",
     )
     map_bias: bool = param(
-        False,
+        True,
         "learn where the route lies relative to the road driven (along and across) from the "
         "GNSS-good track before each outage, take pseudo-positions from the route moved back by "
         "it, and carry its uncertainty, shared by all of an outage's matches, in their covariance",
