@@ -155,6 +155,10 @@ class MapBiasUse:
     chi2: float = float("nan")
     """``learned`` against zero with its covariance (2 dof; applied above
     ``offset.map_bias_min_sigmas`` squared)"""
+    rotation_rad: float = 0.0
+    """the route is drawn turned by this about where the bias was learned (0 unless
+    significant)"""
+    rotation_sigma_rad: float = 0.0
 
 
 @dataclass(frozen=True)
@@ -281,6 +285,11 @@ class MatchRecord:
             out["map_bias_cross_sigma_m"] = float(np.sqrt(n @ c @ n))
             if np.isfinite(self.map_bias.chi2):
                 out["map_bias_chi2"] = self.map_bias.chi2
+            if self.map_bias.rotation_rad != 0.0:
+                out["map_bias_rotation_deg"] = float(np.degrees(self.map_bias.rotation_rad))
+                out["map_bias_rotation_sigma_deg"] = float(
+                    np.degrees(self.map_bias.rotation_sigma_rad)
+                )
         return out
 
 

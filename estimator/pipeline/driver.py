@@ -516,6 +516,8 @@ class Driver:
                 bias.along_observed,
                 learned=bias.measured,
                 chi2=bias.chi2,
+                rotation_rad=bias.rotation,
+                rotation_sigma_rad=bias.rotation_sigma,
             )
             return dataclasses.replace(rec, map_bias=used)
 
