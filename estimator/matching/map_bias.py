@@ -228,11 +228,10 @@ def _least_bias_ahead(
     xy = route.point_at(ahead)
     d = xy - end
     bias = offset + rotation * np.column_stack([-d[:, 1], d[:, 0]])
-    best = math.inf
-    for k, normal in enumerate(route.normal_at(ahead)):
-        v = bias[k]
-        best = min(best, float(v @ np.linalg.solve(_prior_cov(params, normal), v)))
-    return math.sqrt(best)
+    # the prior where the bias was learned: a shift across the road there is one across the
+    # road wherever the route ahead turns
+    inv = np.linalg.inv(_prior_cov(params, route.normal_at(np.array([s_end]))[0]))
+    return math.sqrt(float(np.min(np.einsum("ki,ij,kj->k", bias, inv, bias))))
 
 
 def learn_map_bias(
