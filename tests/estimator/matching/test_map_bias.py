@@ -92,7 +92,8 @@ def test_a_biased_map_no_longer_drags_the_estimate_off_the_road(sample: str) -> 
     opened = open_inputs(SAMPLES / f"{sample}.mcap", SAMPLES / f"{sample}.route.geojson")
     assert opened.route is not None
     inputs = Inputs(opened.log, _shifted(opened.route, 10.0, 3.5), opened.frame)
-    off = run_methods(inputs, Params(), methods=("baseline", "proposed"))
+    without_bias = with_values(Params(), {"extensions.map_bias": False})
+    off = run_methods(inputs, without_bias, methods=("baseline", "proposed"))
     on = run_methods(inputs, ON, methods=("proposed",))
 
     def rmse(run) -> float:
@@ -109,6 +110,10 @@ def test_a_biased_map_no_longer_drags_the_estimate_off_the_road(sample: str) -> 
     diagnostics = on["proposed"].matches[0].diagnostics()
     assert diagnostics["map_bias_along_m"] > 5.0
     assert diagnostics["map_bias_along_sigma_m"] > 0.0
+
+
+def test_the_bias_is_learned_by_default() -> None:
+    assert Params().extensions.map_bias
 
 
 def test_the_paper_method_learns_no_bias() -> None:
