@@ -153,9 +153,13 @@ def _prior_cov(params: Params, normal: F64) -> F64:
 
 
 def prior_bias(params: Params, *, lane: float, normal: F64) -> MapBias:
-    """Nothing learned (no GNSS-good track): the lane offset ``lane`` learned near the portal,
-    zero bias with the prior covariance (``normal``: the route's left normal there)."""
-    return _result(lane, normal, _prior_cov(params, normal))
+    """Nothing learned (too little GNSS-good driving before the outage, or a track that does
+    not follow the route): the lane offset ``lane`` learned near the portal (``normal``: the
+    route's left normal there), and the map taken as right, as without ``extensions.map_bias``
+    (``offset.map_bias_null_sigma_m``). Carrying the prior's 10 m along the road instead makes
+    every pseudo-position of a short-approach outage say nothing along-track, on the many maps
+    that are right."""
+    return _result(lane, normal, params.offset.map_bias_null_sigma_m**2 * np.eye(2))
 
 
 def unbiased(params: Params, *, lane: float, normal: F64, learned: MapBias) -> MapBias:
