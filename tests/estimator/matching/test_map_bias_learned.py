@@ -11,7 +11,7 @@ import numpy as np
 import pytest
 
 from estimator.evaluation.metrics import method_metrics
-from estimator.matching.map_bias import learn_map_bias
+from estimator.matching.map_bias import carried_bias, learn_map_bias
 from estimator.params import Params, with_values
 from estimator.pipeline import run_methods
 from estimator.pipeline.inputs import Inputs
@@ -105,6 +105,35 @@ def test_a_route_on_another_road_is_not_taken_for_a_biased_map() -> None:
     bias = learn(road, Route(road.xy + np.array([-25.0, 0.0])), portal(road))
     assert bias.chi2 > THRESHOLD
     assert not bias.significant
+
+
+def test_the_previous_outage_s_bias_is_carried_to_the_next_with_a_grown_uncertainty() -> None:
+    road = corner()
+    shift = np.array([6.0, -4.0])
+    route = Route(road.xy + shift)
+    bias = learn(road, route, portal(road))
+    assert bias.significant
+    s_next = portal(road) + 600.0
+    normal = road.normal_at(np.array([s_next]))[0]
+    position = road.point_at(np.array([s_next]))[0] + LANE * normal
+    lane_seen = float(route.project(position).lateral[0])  # lane and map's shift together
+    carried = carried_bias(
+        bias,
+        bias.offset,
+        position=position,
+        lane_seen=lane_seen,
+        normal=normal,
+        metres=600.0,
+        params=ON,
+    )
+    np.testing.assert_array_equal(carried.offset, bias.offset)
+    assert carried.lane == pytest.approx(LANE, abs=1.0)
+    # no longer the position error's: carried independent, and grown by the walk
+    np.testing.assert_array_equal(carried.gain[1:], 0.0)
+    walk = ON.offset.map_bias_walk_m_per_sqrt_km**2 * 0.6
+    np.testing.assert_allclose(
+        np.diag(carried.cov[1:, 1:]), np.diag(bias.measured_cov) + walk, rtol=1e-9
+    )
 
 
 def _scenario(bias_enu_m: tuple[float, float]) -> Scenario:
