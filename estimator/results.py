@@ -149,6 +149,16 @@ class MapBiasUse:
     """(2, 2) m^2"""
     along_observed: bool
     """the approach's shape fixed the along-track bias"""
+    learned: F64 = field(default_factory=lambda: np.full(2, np.nan))
+    """(2,) E, N, m: the bias the approach measured before the test against zero (``offset``
+    is zero plus the outage's corrections when the test found it insignificant)"""
+    chi2: float = float("nan")
+    """``learned`` against zero with its covariance (2 dof; applied above
+    ``offset.map_bias_min_sigmas`` squared)"""
+    rotation_rad: float = 0.0
+    """the route is drawn turned by this about where the bias was learned (0 unless
+    significant)"""
+    rotation_sigma_rad: float = 0.0
 
 
 @dataclass(frozen=True)
@@ -273,6 +283,13 @@ class MatchRecord:
             out["map_bias_along_sigma_m"] = float(np.sqrt(t @ c @ t))
             out["map_bias_cross_m"] = float(n @ self.map_bias.offset)
             out["map_bias_cross_sigma_m"] = float(np.sqrt(n @ c @ n))
+            if np.isfinite(self.map_bias.chi2):
+                out["map_bias_chi2"] = self.map_bias.chi2
+            if self.map_bias.rotation_rad != 0.0:
+                out["map_bias_rotation_deg"] = float(np.degrees(self.map_bias.rotation_rad))
+                out["map_bias_rotation_sigma_deg"] = float(
+                    np.degrees(self.map_bias.rotation_sigma_rad)
+                )
         return out
 
 

@@ -61,7 +61,9 @@ A_CHAIN_T = 34  # the run's last fix: time
 A_CHAIN_POS = 35  # (2) its E, N
 A_CHAIN_DR = 37  # (2) the DR track at it
 A_USED_DIST = 39  # A_DIST at the last fix used
-NA = 40
+A_ROUTE = 40  # (3) lane-offset and map-bias (E, N) errors estimated since the outage start
+A_ROUTE_EST = 43  # 1: this outage's route pseudo-positions estimate them
+NA = 44
 
 # idx
 I_IMU, I_WHEEL, I_GNSS, I_OUT, NI = 0, 1, 2, 3, 4
@@ -91,7 +93,8 @@ C_QW_H = 24  # GNSS wander driving PSD, horizontal
 C_QW_V = 25
 C_ROBUST = 26  # test fixes against the dead-reckoned motion
 C_WHITE_VAR = 27  # typical white variance of a horizontal fix coordinate
-NC = 28
+C_ROUTE_EST = 28  # 1: route pseudo-positions estimate the lane-offset and map-bias errors
+NC = 29
 
 # output rows
 O_T = 0

@@ -37,6 +37,7 @@ from estimator.filter.layout import (
     C_QW_V,
     C_RESET_S,
     C_ROBUST,
+    C_ROUTE_EST,
     C_SCALE_ON,
     C_TAU_A,
     C_TAU_G,
@@ -396,6 +397,7 @@ def kernel_config(p: Params, frame: LocalFrame, wheel_t: F64) -> F64:
     cfg[C_SCALE_ON] = float(p.extensions.wheel_scale_state and len(wheel_t) > 0)
     cfg[C_RESET_S] = n.gnss_reset_after_s
     cfg[C_ROBUST] = float(p.extensions.robust_gnss)
+    cfg[C_ROUTE_EST] = float(p.extensions.map_bias and p.offset.map_bias_estimated)
     gap = float(np.median(np.diff(wheel_t))) if len(wheel_t) > 1 else 0.0
     cfg[C_WHEEL_GAP] = max(0.5, 5 * gap)
     return cfg

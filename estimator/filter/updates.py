@@ -17,9 +17,12 @@ from estimator.filter.layout import (
     A_GYRO_N,
     A_GYRO_SUM,
     A_INFLATE,
+    A_ROUTE,
+    A_ROUTE_EST,
     C_AID_DT,
     C_ARW2,
     C_NHC_VAR,
+    C_ROUTE_EST,
     C_SCALE_ON,
     C_WHEEL_VAR,
     C_WIE,
@@ -124,30 +127,44 @@ def apply_update(x: F64, P: F64, y: F64, m: int, PHt: F64, Si: F64, scale_on: bo
     the nominal state at once, so it is zero between updates)."""
     K = np.empty((NE, 3))
     dx = np.empty(NE)
-    _apply_gain(x, P, y, m, PHt, Si, scale_on, K, dx)
+    _apply_gain(x, P, y, m, PHt, Si, scale_on, K, dx, NE)
 
 
 @kernel
 def _apply_gain(
-    x: F64, P: F64, y: F64, m: int, PHt: F64, Si: F64, scale_on: bool, K: F64, dx: F64
+    x: F64,
+    P: F64,
+    y: F64,
+    m: int,
+    PHt: F64,
+    Si: F64,
+    scale_on: bool,
+    K: F64,
+    dx: F64,
+    last_considered: int,
 ) -> None:
-    # the lane-offset and map-bias errors are considered, not estimated (Schmidt): their gain
-    # is zero, and as the last states the symmetric update below then leaves their covariance
-    # as it was
+    # the states from E_LANE up to last_considered (the lane-offset and map-bias errors, but
+    # for the map bias where a route pseudo-position estimates it) are considered, not
+    # estimated (Schmidt): their gain is zero, and as the last states the symmetric update
+    # below then leaves their covariance as it was
     for i in range(NE):
         for a in range(m):
             acc = 0.0
             for b in range(m):
                 acc += PHt[i, b] * Si[b, a]
             K[i, a] = acc  # K = P H^T S^-1
-    for i in range(E_LANE, NE):
+    for i in range(E_LANE, last_considered):
         for a in range(m):
             K[i, a] = 0.0
     for i in range(NE):
+        considered = E_LANE <= i < last_considered
         for j in range(i, NE):
             acc = 0.0
             for a in range(m):
-                acc += K[i, a] * PHt[j, a]
+                if considered:
+                    acc += PHt[i, a] * K[j, a]  # P <- P - P H^T K^T for a considered row
+                else:
+                    acc += K[i, a] * PHt[j, a]
             v = P[i, j] - acc  # P <- P - K (P H^T)^T = P - K H P
             P[i, j] = v
             P[j, i] = v
@@ -303,7 +320,7 @@ def pseudo_position_update(
 
     The truth is ``z + normal * (lane-offset error) - (map-bias error) + noise`` (``normal``:
     the route's left normal at the match; zero leaves the lane-offset error out; the map-bias
-    error is zero unless :func:`set_map_bias` gave it a covariance)."""
+    error is zero unless :func:`clone_route_errors` gave it a covariance)."""
     flush_covariance(P, aux, cfg)
     H = np.zeros((3, NE))
     R = np.zeros((3, 3))
@@ -320,7 +337,13 @@ def pseudo_position_update(
             R[a, b] = R2[a, b]
     p0, p1 = x[X_POS], x[X_POS + 1]
     innovation_cov(P, H, R, 2, PHt, S, Si)
-    apply_update(x, P, y, 2, PHt, Si, cfg[C_SCALE_ON] > 0)
+    K = np.empty((NE, 3))
+    dx = np.empty(NE)
+    estimate = cfg[C_ROUTE_EST] > 0 and aux[A_ROUTE_EST] > 0
+    _apply_gain(x, P, y, 2, PHt, Si, cfg[C_SCALE_ON] > 0, K, dx, E_LANE if estimate else NE)
+    if estimate:
+        for k in range(3):
+            aux[A_ROUTE + k] += dx[E_LANE + k]
     aux[A_INFLATE] = 1.0
     return np.array([y[0], y[1], x[X_POS] - p0, x[X_POS + 1] - p1])
 
@@ -346,22 +369,36 @@ def clone_lane_offset(P: F64, aux: F64, cfg: F64, normal: F64) -> None:
 
 
 @kernel
-def set_map_bias(P: F64, aux: F64, cfg: F64, cov: F64) -> None:
-    """Start an outage's map-bias error with the covariance ``cov`` (2, 2) of the bias learned
-    before it (:mod:`estimator.matching.map_bias`), uncorrelated with the rest of the state.
+def clone_route_errors(P: F64, aux: F64, cfg: F64, gain: F64, cov: F64, estimate: bool) -> None:
+    """Start an outage's lane-offset and map-bias errors (``E_LANE``, ``E_MAP``) as ``gain``
+    (3, 2) times the E/N position error plus an independent part of covariance ``cov`` (3, 3).
 
-    Every pseudo-position of the outage comes from the same map, moved back by the same
-    estimated bias, so all of them share its error: carried as a considered state, consecutive
-    matches still tie the estimate to the route's shape while the absolute position never
-    claims to be better known than the map's bias."""
+    The lane offset and the map's bias are learned from the GNSS-good estimate before the
+    outage (:mod:`estimator.matching.map_bias`), so they are wrong by that estimate's own error
+    (the receiver's slow wander) through the fit's gain, and every pseudo-position of the outage
+    shares it: cloned from the position error, consecutive matches hold the estimate to the road
+    while its absolute variance stays what GNSS left (:func:`clone_lane_offset` is the case of
+    a lane offset alone). ``estimate``: the outage's pseudo-positions estimate these errors
+    (where the road turns, the dead-reckoned shape tells a map shifted sideways from a lane
+    kept), accumulated in ``aux[A_ROUTE:]``; else they are only considered."""
     flush_covariance(P, aux, cfg)
-    for i in range(2):
+    for k in range(3):
+        aux[A_ROUTE + k] = 0.0
+    aux[A_ROUTE_EST] = 1.0 if estimate else 0.0
+    rows = np.empty((3, NE))
+    for k in range(3):
         for j in range(NE):
-            P[E_MAP + i, j] = 0.0
-            P[j, E_MAP + i] = 0.0
-    for i in range(2):
-        for j in range(2):
-            P[E_MAP + i, E_MAP + j] = cov[i, j]
+            rows[k, j] = gain[k, 0] * P[E_POS, j] + gain[k, 1] * P[E_POS + 1, j]
+    for k in range(3):
+        for j in range(NE):
+            if j < E_LANE:
+                P[E_LANE + k, j] = rows[k, j]
+                P[j, E_LANE + k] = rows[k, j]
+    for k in range(3):
+        for m in range(k, 3):
+            v = gain[m, 0] * rows[k, E_POS] + gain[m, 1] * rows[k, E_POS + 1] + cov[k, m]
+            P[E_LANE + k, E_LANE + m] = v
+            P[E_LANE + m, E_LANE + k] = v
 
 
 @kernel

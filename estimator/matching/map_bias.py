@@ -6,26 +6,48 @@ dead-reckoned window to such a route hands the filter a position on the map, so 
 bias drags the estimate along the map while the route-relative deviation looks excellent.
 
 Before each outage the GNSS-good track of the last ``offset.map_bias_track_m`` is registered to
-the route with the same rigid fit as a match (:func:`estimator.matching.match.match_geometry`).
-Where the fitted route position of the vehicle differs from the GNSS position, the difference is
-the map's bias there, measured with the fit's covariance: across-track well, along-track only
-where the road curves within the track (on a straight approach the fit's along-track sigma is
-100 m and the bias stays at its prior). The estimate is the posterior of that measurement with
-a zero-mean prior of ``offset.map_bias_prior_sigma_m``:
+the route. Each track point ``i`` lies a distance ``d_i`` to the left of the route, where the
+route's left normal is ``n_i``. A vehicle keeping the lane offset ``l`` on a road that the route
+draws ``b`` (E, N) away sees
 
-    K   = S0 (S0 + R)^-1           S0 = prior covariance, R = fit covariance + GNSS covariance
-    b   = K (z_route - p_gnss)     the bias estimate
-    S_b = (I - K) S0               its covariance
+    d_i = l - n_i . b + e_i
 
-During the outage every pseudo-position is taken from the route moved back by ``b``. The error
-of ``b`` is one error shared by all of the outage's matches, so the filter carries it as a
-considered state with covariance ``S_b`` (:func:`estimator.filter.updates.set_map_bias`), grown
-as a random walk with the distance driven (a map's error changes along the road,
-``offset.map_bias_walk_m_per_sqrt_km``).
+The lane follows the road's normal, the map's shift does not: where the track turns, the
+cross-track distances tell them apart and fix ``b`` along the road too; on a straight approach
+only ``l - n . b`` is seen, and the priors (``offset.map_bias_lane_sigma_m`` for the lane,
+``offset.map_bias_prior_sigma_m`` along and ``offset.map_bias_cross_sigma_m`` across for the
+map) share it out, with the covariance saying that the share is unknown. A map drawn rotated by
+a small angle ``a`` about the end of the track ``x_e`` is shifted by ``b + a J (x - x_e)``
+(``J`` a quarter turn), which a straight approach sees as a route at an angle to the track:
+with the prior ``offset.map_bias_rotation_sigma_deg`` it is a fourth unknown. The shape's own
+along-track registration (the matcher's rigid fit) adds ``t . b`` where the track turns. A
+least-squares fit with those priors gives ``u = [l, b, a]`` and its covariance.
+
+The errors ``e_i`` have two parts. The estimate's own error at the end of the track (the
+receiver's slow wander) is common to the whole track; it enters ``u`` through a gain ``G``
+(3, 2), and since every pseudo-position of the outage is made from ``u``, the filter carries the
+lane-offset and map-bias errors as considered states cloned through ``G`` from its position
+error at the outage start (:func:`estimator.filter.updates.clone_route_errors`): the
+pseudo-positions then hold the estimate to the road without claiming to know it better than
+GNSS did. The rest (map shape, lane keeping) is noise of ``pseudo.shape_noise_m`` per
+``window.length_m`` of track, independent of the state.
+
+The bias is used only when a chi-square test of ``b`` (or of ``a``) against zero, with its full
+covariance, exceeds ``offset.map_bias_min_sigmas`` squared: a right map then keeps the lane
+offset learned near the portal and no bias, and the filter only carries
+``offset.map_bias_null_sigma_m`` of map error. Otherwise the route is moved back by the bias
+for every match of the outage and ``l`` is its lane offset; the rotation's remaining
+uncertainty grows the map-bias error with the distance from ``x_e``. A bias further from zero
+than ``offset.map_bias_max_prior_sigmas`` of its prior all along the road ahead (a map drawn
+turned is right somewhere, perhaps in the tunnel, and off most far from there) is not a map's
+error but another road (a parallel carriageway): nothing is learned, and the matcher's gates
+judge the route as it is. So is a lane further than ``offset.max_offset_m`` from the
+centreline.
 """
 
 from __future__ import annotations
 
+import dataclasses
 import math
 from dataclasses import dataclass
 
@@ -41,27 +63,179 @@ F64 = NDArray[np.float64]
 
 @dataclass(frozen=True)
 class MapBias:
-    """The route's bias learned before an outage: route position minus true position."""
+    """The route's bias learned before an outage: route position minus road position, at
+    ``pivot`` plus the rotation ``rotation`` about it."""
 
     offset: F64
-    """(2,) E, N: the route lies ``offset`` from the road driven, m"""
+    """(2,) E, N: the route lies ``offset`` from the road driven at ``pivot``, m (zero unless
+    significant)"""
+    rotation: float
+    """the route is drawn turned by this about ``pivot`` (counter-clockwise), rad"""
+    rotation_sigma: float
+    """its 1-sigma, rad"""
+    pivot: F64
+    """(2,) E, N: the end of the track it was learned from"""
+    lane: float
+    """the lane offset to keep with it (positive = vehicle left of the road), m"""
+    gain: F64
+    """(3, 2) how the estimate's E/N position error at the outage start enters the lane-offset
+    and the map-bias (E, N) errors"""
     cov: F64
-    """(2, 2) its covariance where it was learned, m^2"""
+    """(3, 3) covariance of the lane-offset and map-bias (E, N) errors beyond ``gain``'s part"""
     measured: F64
-    """(2,) the fit's raw measurement of the offset, before the prior, m"""
+    """(2,) the fit's estimate of the map's bias at ``pivot`` before the significance test, m
+    (NaN when nothing was learned)"""
+    measured_cov: F64
+    """(2, 2) its covariance, the part shared with the position error included, m^2"""
+    chi2: float
+    """``measured`` against zero (NaN when nothing was learned)"""
     along_observed: bool
-    """the track's shape fixed the along-track bias (else it is the prior's)"""
+    """the track fixed the along-track bias to better than half its prior"""
+
+    @property
+    def significant(self) -> bool:
+        """The bias was applied (it differs from zero by more than the test allows)."""
+        return bool(np.any(self.offset != 0.0) or self.rotation != 0.0)
+
+    def moved_back(self, xy: F64, offset: F64) -> F64:
+        """Route vertices ``xy`` (N, 2) moved back onto the road: by ``offset`` (the bias at
+        ``pivot``, as the outage's matches have corrected it) and the rotation about it."""
+        return xy_moved_back(xy, offset, self.rotation, self.pivot)
 
 
-def prior_bias(params: Params) -> MapBias:
-    """Nothing learned: zero offset with the prior covariance."""
-    s0 = params.offset.map_bias_prior_sigma_m
+def xy_moved_back(xy: F64, offset: F64, rotation: float, pivot: F64) -> F64:
+    """Route vertices ``xy`` (N, 2) of a map shifted by ``offset`` at ``pivot`` and turned by
+    ``rotation`` (rad, small) about it, moved back onto the road."""
+    d = xy - pivot
+    out: F64 = xy - offset - rotation * np.column_stack([-d[:, 1], d[:, 0]])
+    return out
+
+
+def _result(
+    lane: float,
+    normal: F64,
+    map_cov: F64,
+    *,
+    measured: F64 | None = None,
+    measured_cov: F64 | None = None,
+    chi2: float = math.nan,
+    along_observed: bool = False,
+    pivot: F64 | None = None,
+) -> MapBias:
+    """No bias applied: the lane offset ``lane`` learned near the portal (its error the
+    position error across ``normal``), the map-bias error of covariance ``map_cov``."""
+    cov = np.zeros((3, 3))
+    cov[1:, 1:] = map_cov
+    gain = np.zeros((3, 2))
+    gain[0] = normal
     return MapBias(
         offset=np.zeros(2),
-        cov=s0**2 * np.eye(2),
-        measured=np.full(2, np.nan),
-        along_observed=False,
+        rotation=0.0,
+        rotation_sigma=0.0,
+        pivot=np.zeros(2) if pivot is None else pivot,
+        lane=lane,
+        gain=gain,
+        cov=cov,
+        measured=np.full(2, np.nan) if measured is None else measured,
+        measured_cov=np.full((2, 2), np.nan) if measured_cov is None else measured_cov,
+        chi2=chi2,
+        along_observed=along_observed,
     )
+
+
+def _prior_cov(params: Params, normal: F64) -> F64:
+    """(2, 2) the map bias's prior covariance where the road's left normal is ``normal``."""
+    op = params.offset
+    t = np.array([normal[1], -normal[0]])
+    out: F64 = op.map_bias_prior_sigma_m**2 * np.outer(t, t)
+    out += op.map_bias_cross_sigma_m**2 * np.outer(normal, normal)
+    return out
+
+
+def prior_bias(params: Params, *, lane: float, normal: F64) -> MapBias:
+    """Nothing learned (too little GNSS-good driving before the outage, or a track that does
+    not follow the route): the lane offset ``lane`` learned near the portal (``normal``: the
+    route's left normal there), and the map taken as right, as without ``extensions.map_bias``
+    (``offset.map_bias_null_sigma_m``). Carrying the prior's 10 m along the road instead makes
+    every pseudo-position of a short-approach outage say nothing along-track, on the many maps
+    that are right."""
+    return _result(lane, normal, params.offset.map_bias_null_sigma_m**2 * np.eye(2))
+
+
+def unbiased(params: Params, *, lane: float, normal: F64, learned: MapBias) -> MapBias:
+    """The previous outage's finding that the map is right (``learned``), carried to the next
+    one with the lane offset ``lane`` learned near its portal (``normal``: the route's left
+    normal there)."""
+    null = params.offset.map_bias_null_sigma_m**2 * np.eye(2)
+    return _result(
+        lane,
+        normal,
+        null,
+        measured=learned.measured,
+        measured_cov=learned.measured_cov,
+        chi2=learned.chi2,
+        along_observed=learned.along_observed,
+        pivot=learned.pivot,
+    )
+
+
+def _thin(xy: F64, spacing: float) -> NDArray[np.intp]:
+    """Indices of the points of ``xy`` at least ``spacing`` apart along it, the last kept."""
+    step = np.hypot(*np.diff(xy, axis=0).T)
+    back = np.concatenate([np.cumsum(step[::-1])[::-1], [0.0]])
+    keep = np.sort(np.unique(np.floor(back / spacing), return_index=True)[1])
+    if keep[-1] != len(xy) - 1:
+        keep = np.append(keep, len(xy) - 1)
+    return keep
+
+
+def _along_by_shape(
+    xy: F64, track_cov: F64, route: Route, *, s_guess: float, lane: float, params: Params
+) -> tuple[float, F64, float] | None:
+    """The along-track part of the bias from registering the track's shape to the route with
+    the matcher's rigid fit (:func:`estimator.matching.match.match_geometry`): the along-track
+    difference between the fitted route position of the end and the end, the direction and
+    its variance; None where the shape does not fix it."""
+    geometry = match_geometry(
+        xy, xy[-1], track_cov, route, s_guess=s_guess, lane_offset=lane, params=params
+    )
+    fit = geometry.fit
+    if fit is None or not fit.along_observed or not np.isfinite(fit.residual):
+        return None
+    if fit.residual > params.offset.map_bias_max_residual_m:
+        return None
+    t = np.asarray(fit.tangent, np.float64)
+    return float(t @ (fit.z - xy[-1])), t, float(t @ fit.obs_cov @ t)
+
+
+def _solve(A: F64, d: F64, weights: F64, P0: F64, nrm: F64, prior: F64) -> tuple[F64, F64, F64]:
+    """The weighted least-squares ``u = prior + K (d - A prior)`` with the prior ``prior``,
+    ``P0``, its covariance with the independent noise, and the gain ``G = K N`` of the track's
+    common error: ``d`` holds ``n_i . (estimate - truth)``, so u's error is ``K N eps``; the
+    filter's states are the negative of u's error and its position error is truth -
+    estimate, hence ``G``."""
+    C = np.linalg.inv(A.T @ (weights[:, None] * A) + np.linalg.inv(P0))
+    K = C @ (A * weights[:, None]).T
+    return prior + K @ (d - A @ prior), C, K @ nrm
+
+
+def _least_bias_ahead(
+    route: Route, s_end: float, end: F64, offset: F64, rotation: float, params: Params
+) -> float:
+    """The smallest the bias ``offset`` at ``end`` (route arc length ``s_end``), turned by
+    ``rotation`` about it, gets on the next ``offset.map_bias_track_m`` times ten of route, in
+    prior sigmas. A map drawn turned is off most far from where it is right, which may lie
+    in the tunnel ahead; a parallel road is off by as much everywhere."""
+    ahead = np.arange(s_end, min(s_end + 10.0 * params.offset.map_bias_track_m, route.length), 50.0)
+    if len(ahead) == 0:
+        ahead = np.array([s_end])
+    xy = route.point_at(ahead)
+    d = xy - end
+    bias = offset + rotation * np.column_stack([-d[:, 1], d[:, 0]])
+    # the prior where the bias was learned: a shift across the road there is one across the
+    # road wherever the route ahead turns
+    inv = np.linalg.inv(_prior_cov(params, route.normal_at(np.array([s_end]))[0]))
+    return math.sqrt(float(np.min(np.einsum("ki,ij,kj->k", bias, inv, bias))))
 
 
 def learn_map_bias(
@@ -72,39 +246,146 @@ def learn_map_bias(
     s_guess: float | None,
     lane_offset: float,
     params: Params,
+    track_var: F64 | None = None,
 ) -> MapBias:
     """The map bias from ``track_xy`` (N, 2), the GNSS-good estimate over the last
     ``offset.map_bias_track_m`` in time order, ending at the vehicle; ``track_cov`` its E/N
-    covariance at the end; ``s_guess`` the route arc length of the end. A fit that does not
-    follow the road (residual above ``offset.map_bias_max_residual_m``) learns nothing."""
+    covariance at the end; ``track_var`` (N,) the estimate's horizontal variance per point
+    (a point less certain than the end weighs less); ``s_guess`` the route arc length of the
+    end; ``lane_offset`` the lane offset learned near the end (kept when the bias is not
+    significant). A track that does not follow the route (residual above
+    ``offset.map_bias_max_residual_m``) learns nothing."""
     op = params.offset
-    prior = prior_bias(params)
-    if len(track_xy) < 2:
+    xy = np.asarray(track_xy, np.float64)[:, :2]
+    end_s = route.project(xy[-1:]).s[0] if s_guess is None else float(s_guess)
+    normal_end = route.normal_at(np.array([end_s]))[0]
+    prior = prior_bias(params, lane=lane_offset, normal=normal_end)
+    if len(xy) < 2:
         return prior
-    end = np.asarray(track_xy[-1], np.float64)
-    geometry = match_geometry(
-        track_xy,
-        end,
-        track_cov,
-        route,
-        s_guess=s_guess,
-        lane_offset=lane_offset,
-        params=params,
-    )
-    fit = geometry.fit
-    if fit is None or not np.isfinite(fit.residual) or fit.residual > op.map_bias_max_residual_m:
+    keep = _thin(xy, params.window.spacing_m)
+    pts = xy[keep]
+    step = np.hypot(*np.diff(pts, axis=0).T)
+    back = np.concatenate([np.cumsum(step[::-1])[::-1], [0.0]])
+    proj = route.project(pts, end_s - back, params.window.route_search_m)
+    inside = (proj.s > 1e-6) & (proj.s < route.length - 1e-6)
+    span = float(back[0])
+    if np.count_nonzero(inside) < 5 or span < params.window.length_m:
         return prior
-    measured = fit.z - end
-    t = fit.tangent
-    r = float(t @ (fit.obs_cov + track_cov) @ t)
-    b = float(t @ measured)
-    s0 = op.map_bias_prior_sigma_m**2
-    k = s0 / (s0 + r)  # K = S0 (S0 + R)^-1
-    var = (1.0 - k) * s0  # S_b = (1 - K) S0
-    along = k * b if abs(b) >= op.map_bias_min_sigmas * math.sqrt(r) else 0.0  # b = K (z - p)
+    end = xy[-1]
+    d = proj.lateral[inside]
+    nrm = route.normal_at(proj.s[inside])
+    rel = pts[inside] - end
+    turned = np.column_stack([-rel[:, 1], rel[:, 0]])  # J (x - x_e)
+    A = np.column_stack([np.ones(len(d)), -nrm, -np.sum(nrm * turned, axis=1)])
+    # the map's shape and the lane keeping err together over a window's length
+    n_eff = max(span / params.window.length_m, 1.0)
+    var = np.full(len(d), len(d) * params.pseudo.shape_noise_m**2 / n_eff)
+    if track_var is not None:
+        v = np.asarray(track_var, np.float64)[keep][inside]
+        var += np.maximum(v - 0.5 * float(np.trace(track_cov)), 0.0)
+    weights = 1.0 / var
+    n_lateral = len(d)
+    P0 = np.zeros((4, 4))
+    P0[0, 0] = op.map_bias_lane_sigma_m**2
+    P0[1:3, 1:3] = _prior_cov(params, normal_end)
+    P0[3, 3] = math.radians(op.map_bias_rotation_sigma_deg) ** 2
+    # the shape's along-track registration, to the route moved back by the cross-track fit's
+    # bias and lane (matched to a wrong lane, a bend's arc length is off): t . b = t . b1 + y,
+    # the track's common error entering as -t . eps
+    mean = np.array([op.map_bias_lane_prior_m, 0.0, 0.0, 0.0])
+    u1 = _solve(A, d, weights, P0, nrm, mean)[0]
+    moved = Route(xy_moved_back(route.xy, u1[1:3], float(u1[3]), end))
+    s_moved = float(moved.project(end[None, :], end_s, params.window.route_search_m).s[0])
+    along = _along_by_shape(xy, track_cov, moved, s_guess=s_moved, lane=float(u1[0]), params=params)
+    if along is not None:
+        y, tangent, along_var = along
+        A = np.vstack([A, np.concatenate([[0.0], tangent, [0.0]])])
+        d = np.append(d, y + float(tangent @ u1[1:3]))
+        nrm = np.vstack([nrm, -tangent])
+        weights = np.append(weights, 1.0 / along_var)
+    u, C, G = _solve(A, d, weights, P0, nrm, mean)
+    residual = float(np.sqrt(np.mean((d[:n_lateral] - A[:n_lateral] @ u) ** 2)))
+    if not np.isfinite(residual) or residual > op.map_bias_max_residual_m:
+        return prior
+    total = C + G @ track_cov @ G.T
+    rotated = u[3] ** 2 / total[3, 3] >= op.map_bias_min_sigmas**2
+    if not rotated:
+        # a rotation no test tells from zero is not applied, nor does its sigma, extrapolated
+        # from the approach into a long tunnel, swamp the bias learned at the portal
+        u3, C3, G3 = _solve(A[:, :3], d, weights, P0[:3, :3], nrm, mean[:3])
+        u, C, G = np.append(u3, 0.0), np.zeros((4, 4)), np.zeros((4, 2))
+        C[:3, :3], G[:3] = C3, G3
+        total = C + G @ track_cov @ G.T
+    b, Cb = u[1:3], total[1:3, 1:3]
+    chi2 = float(b @ np.linalg.solve(Cb, b))
+    t_end = np.array([normal_end[1], -normal_end[0]])
+    along_observed = math.sqrt(float(t_end @ C[1:3, 1:3] @ t_end)) < 0.5 * op.map_bias_prior_sigma_m
+    if (
+        abs(u[0]) > op.max_offset_m
+        or _least_bias_ahead(route, end_s, end, b, float(u[3]), params)
+        > op.map_bias_max_prior_sigmas
+    ):
+        map_cov = np.zeros((2, 2))
+    elif chi2 < op.map_bias_min_sigmas**2 and not rotated:
+        map_cov = op.map_bias_null_sigma_m**2 * np.eye(2)
+    else:
+        map_cov = None
+    if map_cov is not None:
+        return _result(
+            lane_offset,
+            normal_end,
+            map_cov,
+            measured=b,
+            measured_cov=Cb,
+            chi2=chi2,
+            along_observed=along_observed,
+            pivot=end,
+        )
     return MapBias(
-        offset=along * t,
-        cov=var * np.outer(t, t) + op.map_bias_cross_sigma_m**2 * np.outer(fit.normal, fit.normal),
-        measured=measured,
-        along_observed=bool(fit.along_observed),
+        offset=b,
+        rotation=float(u[3]),
+        rotation_sigma=math.sqrt(float(C[3, 3])),
+        pivot=end,
+        lane=float(u[0]),
+        gain=G[:3],
+        cov=C[:3, :3],
+        measured=b,
+        measured_cov=Cb,
+        chi2=chi2,
+        along_observed=along_observed,
+    )
+
+
+def carried_bias(
+    previous: MapBias,
+    offset: F64,
+    *,
+    position: F64,
+    lane_seen: float,
+    normal: F64,
+    metres: float,
+    params: Params,
+) -> MapBias:
+    """The bias of the previous outage, ``offset`` at its pivot as that outage's matches left
+    it, carried to the next outage ``metres`` further along where the driving in between was
+    too short to learn one: the map's bias there is the same one, wandered and turned a little
+    further (``offset.map_bias_walk_m_per_sqrt_km``, the rotation's sigma). ``lane_seen``: the
+    cross-track offset from the route learned near the portal (lane and map together), at
+    ``position`` where the route's left normal is ``normal``. The bias's error is no longer
+    the position's (GNSS has since corrected the position), so it is carried independent."""
+    op = params.offset
+    d = position - previous.pivot
+    here = offset + previous.rotation * np.array([-d[1], d[0]])
+    grow = op.map_bias_walk_m_per_sqrt_km**2 * metres / 1000.0
+    grow += previous.rotation_sigma**2 * float(d @ d)
+    cov = np.zeros((3, 3))
+    cov[1:, 1:] = previous.measured_cov + grow * np.eye(2)
+    gain = np.zeros((3, 2))
+    gain[0] = normal
+    return dataclasses.replace(
+        previous,
+        offset=offset,
+        lane=float(lane_seen + normal @ here),
+        gain=gain,
+        cov=cov,
     )

@@ -279,7 +279,7 @@ class OffsetParams:
         step=0.5,
     )
     map_bias_walk_m_per_sqrt_km: float = param(
-        1.0,
+        0.5,
         "random walk of the map's bias along the road: its 1-sigma grows by this after 1 km",
         unit="m/sqrt(km)",
         lo=0,
@@ -287,22 +287,72 @@ class OffsetParams:
         step=0.5,
     )
     map_bias_cross_sigma_m: float = param(
-        1.5,
-        "1-sigma of the map's bias across the road at the outage start: a straight approach "
-        "cannot tell the lane from a map shifted sideways, which a later bend turns into "
-        "along-track error",
+        5.0,
+        "1-sigma of the map's bias across the road before it is learned: a straight approach "
+        "cannot tell the lane from a map shifted sideways, and this prior with "
+        "offset.map_bias_lane_sigma_m shares the offset seen out between them",
+        unit="m",
+        lo=0.1,
+        hi=100,
+        step=0.1,
+    )
+    map_bias_lane_prior_m: float = param(
+        -1.75,
+        "the vehicle's lane offset from the road's centreline expected before it is learned "
+        "(positive = left): half a 3.5 m lane to the right in right-hand traffic",
+        unit="m",
+        lo=-10,
+        hi=10,
+        step=0.05,
+    )
+    map_bias_lane_sigma_m: float = param(
+        2.0,
+        "1-sigma of the vehicle's lane offset from the road's centreline (the prior that keeps "
+        "a sideways map shift from being taken for a lane the vehicle keeps through bends)",
+        unit="m",
+        lo=0.1,
+        hi=20,
+        step=0.1,
+    )
+    map_bias_rotation_sigma_deg: float = param(
+        1.0,
+        "1-sigma of the map's rotation before it is learned (a map drawn turned about the "
+        "portal is shifted more the further into the tunnel)",
+        unit="deg",
+        lo=0.01,
+        hi=20,
+        step=0.1,
+    )
+    map_bias_max_prior_sigmas: float = param(
+        3.0,
+        "a bias further from zero than this many of its prior sigmas is not a map's error but "
+        "another road: nothing is learned",
+        lo=0.5,
+        hi=20,
+        step=0.1,
+    )
+    map_bias_null_sigma_m: float = param(
+        0.0,
+        "1-sigma of the map-bias error carried when the learned bias is not significant and "
+        "is not applied",
         unit="m",
         lo=0,
-        hi=50,
+        hi=20,
         step=0.1,
     )
     map_bias_min_sigmas: float = param(
-        2.5,
-        "an along-track bias measured within this many of its sigmas of zero is not applied "
-        "(its uncertainty still is)",
+        3.0,
+        "a bias whose chi-square against zero (2 dof, its full covariance) is below this "
+        "squared is not applied",
         lo=0,
         hi=10,
         step=0.1,
+    )
+    map_bias_estimated: bool = param(
+        True,
+        "the route pseudo-positions of an outage also estimate the learned lane offset's and "
+        "map bias's errors (a bend tells a sideways map shift from a lane; else they are only "
+        "considered)",
     )
     map_bias_max_residual_m: float = param(
         3.0,
@@ -401,7 +451,7 @@ class ExtensionParams:
         "matched as the other switches say",
     )
     map_bias: bool = param(
-        False,
+        True,
         "learn where the route lies relative to the road driven (along and across) from the "
         "GNSS-good track before each outage, take pseudo-positions from the route moved back by "
         "it, and carry its uncertainty, shared by all of an outage's matches, in their covariance",

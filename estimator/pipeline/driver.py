@@ -36,6 +36,7 @@ from estimator.filter.layout import (
     A_DIST,
     A_DR,
     A_NEXT_OUT,
+    A_ROUTE,
     A_TIME,
     A_USED_DIST,
     C_OUT_DT,
@@ -53,7 +54,7 @@ from estimator.filter.portal import advance_to_outage
 from estimator.filter.propagation import flush_covariance
 from estimator.filter.route_update import applied_obs_cov, apply_route_match
 from estimator.filter.setup import FilterInputs, prepare_inputs
-from estimator.filter.updates import clone_lane_offset, grow_map_bias, set_map_bias
+from estimator.filter.updates import clone_lane_offset, clone_route_errors, grow_map_bias
 from estimator.log import Log
 from estimator.matching import (
     MatchGeometry,
@@ -64,7 +65,13 @@ from estimator.matching import (
     route_arc_length,
 )
 from estimator.matching.kernels import max_turn_deg, search_right, track_window
-from estimator.matching.map_bias import MapBias, learn_map_bias, prior_bias
+from estimator.matching.map_bias import (
+    MapBias,
+    carried_bias,
+    learn_map_bias,
+    prior_bias,
+    unbiased,
+)
 from estimator.matching.reanchor import should_reanchor, within_drift
 from estimator.nav.frames import LocalFrame
 from estimator.params import Method, Params, for_method, matching_params
@@ -205,6 +212,10 @@ class _Track:
     """the map bias of the current interval (``extensions.map_bias``)"""
     biased_route: Route | None = None
     """the route moved back by ``bias``: where the road driven is"""
+    biased_key: tuple[float, float] = (0.0, 0.0)
+    """the offset ``biased_route`` was moved back by"""
+    pivot_dist: float = 0.0
+    """distance travelled at the end of the track the bias was learned from"""
 
 
 class Driver:
@@ -278,11 +289,15 @@ class Driver:
                 if not self.matching:
                     continue
                 self.begin_interval(a, f.out, f.n_out, f.x, f.aux)
-                if self.p.extensions.lane_offset_state and self.track.s is not None:
+                bias = self.track.bias
+                if bias is not None:
+                    gain, cov = bias.gain.copy(), bias.cov.copy()
+                    if not self.p.extensions.lane_offset_state:
+                        gain[0], cov[0], cov[:, 0] = 0.0, 0.0, 0.0
+                    clone_route_errors(f.P, f.aux, self.inp.cfg, gain, cov, bias.significant)
+                elif self.p.extensions.lane_offset_state and self.track.s is not None:
                     t = self.route.tangent_at(self.track.s)[0]
                     clone_lane_offset(f.P, f.aux, self.inp.cfg, np.array([-t[1], t[0]]))
-                if self.track.bias is not None:
-                    set_map_bias(f.P, f.aux, self.inp.cfg, self.track.bias.cov)
             while True:
                 t_try = a + tr.min_outage_s + k * tr.interval_s
                 if t_try >= b or t_try > self.inp.imu_t[-1]:
@@ -293,16 +308,28 @@ class Driver:
                 d = float(f.aux[A_DIST])
                 if d - dist_a >= tr.min_outage_distance_m and d - dist_last >= spacing:
                     if not redo:
-                        if self.track.bias is not None:
-                            walk = self.p.offset.map_bias_walk_m_per_sqrt_km
-                            moved = d - (dist_last if dist_last > -math.inf else dist_a)
-                            grow_map_bias(f.P, walk**2 * moved / 1000.0)
+                        if self.track.bias is not None and self.track.bias.significant:
+                            grow_map_bias(f.P, self._bias_growth(d, dist_last, dist_a))
                         self._checkpoint("attempt", i, k, dist_a, dist_last)
                     self._attempt_live()
                     dist_last = d
                 k += 1
             at = None
         f.advance(math.inf)
+
+    def _bias_growth(self, d: float, dist_last: float, dist_a: float) -> float:
+        """Variance (m^2, per axis) an applied map bias's error gains from the previous attempt
+        (or the outage start) to travelled distance ``d``: the map's error wandering along the
+        road (``offset.map_bias_walk_m_per_sqrt_km``), and the learned rotation's uncertainty
+        carried further from where it was learned. A bias tested insignificant keeps
+        ``offset.map_bias_null_sigma_m``."""
+        bias = self.track.bias
+        assert bias is not None
+        before = dist_last if dist_last > -math.inf else dist_a
+        walk = self.p.offset.map_bias_walk_m_per_sqrt_km
+        far, near = d - self.track.pivot_dist, before - self.track.pivot_dist
+        turn = bias.rotation_sigma**2 * (far * far - near * near)
+        return float(walk**2 * (d - before) / 1000.0 + max(turn, 0.0))
 
     def _checkpoint(
         self,
@@ -352,25 +379,52 @@ class Driver:
             s_guess=s_last,
         )
         tr.t_start = t_a
+        previous = None
+        if tr.bias is not None and np.isfinite(tr.bias.chi2):
+            previous = (tr.bias, self._route_estimate(aux)[0], tr.pivot_dist)
         tr.bias, tr.biased_route = None, None
         if self.p.extensions.map_bias:
             tr.bias = self._learn_bias(rows, last, s_last)
-            tr.biased_route = Route(
-                self.route.xy - tr.bias.offset, name=self.route.name, source=self.route.source
-            )
+            if previous is not None and not np.isfinite(tr.bias.chi2):
+                # too little driving since the previous outage to learn: its bias still holds
+                bias, offset, pivot_dist = previous
+                normal = self.route.normal_at(np.array([tr.s]))[0]
+                if bias.significant:
+                    tr.pivot_dist = pivot_dist
+                    tr.bias = carried_bias(
+                        bias,
+                        offset,
+                        position=x[:2].copy(),
+                        lane_seen=tr.lane,
+                        normal=normal,
+                        metres=float(aux[A_DIST]) - pivot_dist,
+                        params=self.p,
+                    )
+                else:
+                    tr.bias = unbiased(self.p, lane=tr.lane, normal=normal, learned=bias)
+            tr.lane = tr.bias.lane
 
     def _learn_bias(self, rows: F64, last: NDArray[np.intp], s_last: float) -> MapBias:
         """The map bias from the estimate over the last ``offset.map_bias_track_m`` of travel
         up to the last epoch a fix was used in (:func:`learn_map_bias`)."""
+        lane = self.track.lane
+        prior = prior_bias(self.p, lane=lane, normal=self.route.normal_at(np.array([s_last]))[0])
         if not len(last):
-            return prior_bias(self.p)
+            return prior
         end = int(last[-1])
         d = rows[: end + 1, O_DIST]
         i0 = int(search_right(d, float(d[end]) - self.p.offset.map_bias_track_m))
+        # only driving under GNSS, once the estimate has settled on it again: the previous
+        # outage's dead reckoning, and the pull back from it, are not the road
+        ends = [b for _, b in self.inp.degraded if b <= rows[end, O_T]]
+        if ends:
+            settled = ends[-1] + self.p.noise.gnss_rerun_lag_s
+            i0 = max(i0, int(np.searchsorted(rows[: end + 1, O_T], settled, side="right")))
         track = rows[i0 : end + 1]
         if np.count_nonzero(track[:, O_GNSS] > 0) < 5:
-            return prior_bias(self.p)
+            return prior
         sig = track[-1, O_SIG_POS : O_SIG_POS + 2]
+        self.track.pivot_dist = float(d[end])
         return learn_map_bias(
             track[:, O_POS : O_POS + 2],
             np.diag(sig**2),
@@ -378,6 +432,7 @@ class Driver:
             s_guess=s_last,
             lane_offset=self.track.lane,
             params=self.p,
+            track_var=0.5 * np.sum(track[:, O_SIG_POS : O_SIG_POS + 2] ** 2, axis=1),
         )
 
     def _window(self, out: F64, n_out: int, x: F64, aux: F64, length_m: float) -> F64:
@@ -446,14 +501,25 @@ class Driver:
         w = self.p.window
 
         def attempt(window_xy: F64, params: Params) -> MatchRecord:
-            geometry = self._geometry(window_xy, x[:2].copy(), position_on_map_cov(P), pred, params)
+            geometry = self._geometry(
+                window_xy, x[:2].copy(), position_on_map_cov(P), pred, params, aux
+            )
             rec = judge_match(
                 geometry, params, index=len(self.records), t=float(aux[A_TIME]), epoch=n_out
             )
             bias = self.track.bias
             if bias is None:
                 return rec
-            used = MapBiasUse(bias.offset, P[E_MAP:, E_MAP:].copy(), bias.along_observed)
+            offset, _ = self._route_estimate(aux)
+            used = MapBiasUse(
+                offset,
+                P[E_MAP:, E_MAP:].copy(),
+                bias.along_observed,
+                learned=bias.measured,
+                chi2=bias.chi2,
+                rotation_rad=bias.rotation,
+                rotation_sigma_rad=bias.rotation_sigma,
+            )
             return dataclasses.replace(rec, map_bias=used)
 
         rec = attempt(self._window(out, n_out, x, aux, w.length_m), self.p)
@@ -491,18 +557,29 @@ class Driver:
         cov: F64,
         pred: float | None,
         params: Params,
+        aux: F64,
     ) -> MatchGeometry:
         """:func:`match_geometry` of an attempt, or the previous run's for the same inputs
         (window, position, covariance, route guess, lane offset, map bias and the parameters
         the geometry depends on): after a gate change the attempts before the first changed
         outcome are only re-judged, not fitted again.
 
-        With a map bias the window is matched to the route moved back by it."""
+        With a map bias the window is matched to the route moved back by it, and to the lane
+        it learned, both as the outage's matches have corrected them (:meth:`_route_estimate`)."""
         tr = self.track
         lane, route = tr.lane, self.route
         bias_key: tuple[float, ...] = ()
-        if tr.bias is not None and tr.biased_route is not None:
-            route, bias_key = tr.biased_route, tuple(map(float, tr.bias.offset))
+        if tr.bias is not None:
+            offset, lane = self._route_estimate(aux)
+            key = (float(offset[0]), float(offset[1]))
+            if tr.biased_route is None or tr.biased_key != key:
+                tr.biased_route = Route(
+                    tr.bias.moved_back(self.route.xy, offset),
+                    name=self.route.name,
+                    source=self.route.source,
+                )
+                tr.biased_key = key
+            route, bias_key = tr.biased_route, key
         return self.memo.get(
             ("geometry", pred, lane, bias_key, geometry_params(params)),
             (window_xy, p_dr, cov),
@@ -510,6 +587,15 @@ class Driver:
                 window_xy, p_dr, cov, route, s_guess=pred, lane_offset=lane, params=params
             ),
         )
+
+    def _route_estimate(self, aux: F64) -> tuple[F64, float]:
+        """The map bias and the lane offset of the current interval: as learned before the
+        outage plus what its matches estimated of their errors since (the filter's
+        ``A_ROUTE``, ``offset.map_bias_estimated``)."""
+        bias = self.track.bias
+        assert bias is not None
+        offset: F64 = bias.offset + aux[A_ROUTE + 1 : A_ROUTE + 3]
+        return offset, bias.lane + float(aux[A_ROUTE])
 
     def after_match(self, rec: MatchRecord, x_after: F64, aux: F64) -> None:
         """Follow the vehicle along the route after an accepted match."""

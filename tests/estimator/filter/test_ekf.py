@@ -126,23 +126,72 @@ def test_pseudo_position_update_is_the_kalman_update(normal):
     assert aux[layout.A_INFLATE] == 1.0
 
 
-def test_the_map_bias_error_starts_uncorrelated_and_grows_as_a_random_walk():
+def test_a_pseudo_position_estimates_the_route_errors_when_the_bias_is_applied():
+    """With the map bias applied (``offset.map_bias_estimated``), the lane-offset and map-bias
+    errors get their optimal gain too, and their estimate accumulates in ``aux[A_ROUTE:]``."""
+    rng = np.random.default_rng(4)
+    P = _random_cov(rng) * 0.1
+    cfg = _config(rng)
+    cfg[layout.C_ROUTE_EST] = 1.0
+    x = np.zeros(layout.NX)
+    x[layout.X_QUAT] = 1.0
+    x[layout.X_SCALE] = 1.0
+    z = np.array([1.5, -0.5])
+    R = np.array([[2.0, 0.3], [0.3, 0.5]])
+    n = np.array([0.6, 0.8])
+    H = np.zeros((2, layout.NE))
+    H[0, layout.E_POS] = H[1, layout.E_POS + 1] = 1.0
+    H[:, layout.E_LANE] = -n
+    H[:, layout.E_MAP : layout.E_MAP + 2] = np.eye(2)
+    K = P @ H.T @ np.linalg.inv(H @ P @ H.T + R)
+    dx = K @ (z - x[:2])
+    P_exp = P - K @ H @ P
+    aux = np.zeros(layout.NA)
+    aux[layout.A_ROUTE_EST] = 1.0
+    aux[layout.A_ROUTE : layout.A_ROUTE + 3] = [0.5, 1.0, -1.0]
+    updates.pseudo_position_update(x, P, aux, cfg, z, R, n)
+    np.testing.assert_allclose(P, P_exp, rtol=1e-10, atol=1e-12)
+    np.testing.assert_allclose(
+        aux[layout.A_ROUTE : layout.A_ROUTE + 3],
+        np.array([0.5, 1.0, -1.0]) + dx[layout.E_LANE :],
+        rtol=1e-12,
+    )
+    # the same update with the bias not applied only considers them
+    P2 = _random_cov(rng) * 0.1
+    aux2 = np.zeros(layout.NA)
+    considered = P2[layout.E_LANE :, layout.E_LANE :].copy()
+    updates.pseudo_position_update(x.copy(), P2, aux2, cfg, z, R, n)
+    np.testing.assert_array_equal(P2[layout.E_LANE :, layout.E_LANE :], considered)
+    np.testing.assert_array_equal(aux2[layout.A_ROUTE : layout.A_ROUTE + 3], 0.0)
+
+
+def test_the_route_errors_start_as_the_position_error_through_the_gain_and_grow():
     rng = np.random.default_rng(7)
     P = _random_cov(rng)
     cfg = _config(rng)
     aux = np.zeros(layout.NA)
+    aux[layout.A_ROUTE : layout.A_ROUTE + 3] = [0.3, -1.0, 2.0]
     before = P.copy()
-    cov = np.array([[9.0, 2.0], [2.0, 4.0]])
-    updates.set_map_bias(P, aux, cfg, cov)
-    bias = slice(layout.E_MAP, layout.E_MAP + 2)
-    np.testing.assert_array_equal(P[bias, bias], cov)
-    np.testing.assert_array_equal(P[bias, : layout.E_MAP], 0.0)
+    gain = rng.standard_normal((3, 2))
+    cov = np.array([[1.0, 0.2, 0.0], [0.2, 9.0, 2.0], [0.0, 2.0, 4.0]])
+    updates.clone_route_errors(P, aux, cfg, gain, cov, True)
+    pos, route = slice(layout.E_POS, layout.E_POS + 2), slice(layout.E_LANE, layout.NE)
+    np.testing.assert_allclose(
+        P[route, : layout.E_LANE], gain @ before[pos, : layout.E_LANE], rtol=1e-12
+    )
+    np.testing.assert_allclose(
+        P[route, route], gain @ before[pos, pos] @ gain.T + cov, rtol=1e-12, atol=1e-12
+    )
     np.testing.assert_array_equal(P, P.T)
     np.testing.assert_array_equal(
-        P[: layout.E_MAP, : layout.E_MAP], before[: layout.E_MAP, : layout.E_MAP]
+        P[: layout.E_LANE, : layout.E_LANE], before[: layout.E_LANE, : layout.E_LANE]
     )
+    np.testing.assert_array_equal(aux[layout.A_ROUTE : layout.A_ROUTE + 3], 0.0)
+    assert aux[layout.A_ROUTE_EST] == 1.0
+    bias = slice(layout.E_MAP, layout.E_MAP + 2)
+    grown = np.diag(P[bias, bias]).copy()
     updates.grow_map_bias(P, 0.5)
-    np.testing.assert_array_equal(np.diag(P[bias, bias]), np.diag(cov) + 0.5)
+    np.testing.assert_array_equal(np.diag(P[bias, bias]), grown + 0.5)
 
 
 def test_the_lane_offset_error_starts_as_the_cross_track_position_error():

@@ -50,7 +50,7 @@ def test_a_route_drawn_ahead_of_the_road_on_a_bend_is_measured_along_the_road() 
     bias = learn(road, 10.0 * tangent, s_end)
     assert bias.along_observed
     assert float(tangent @ bias.offset) == pytest.approx(10.0, abs=1.5)
-    assert np.sqrt(tangent @ bias.cov @ tangent) < 3.0
+    assert np.sqrt(tangent @ bias.measured_cov @ tangent) < 3.0
 
 
 def test_a_straight_approach_leaves_the_along_track_bias_at_its_prior() -> None:
@@ -58,7 +58,7 @@ def test_a_straight_approach_leaves_the_along_track_bias_at_its_prior() -> None:
     bias = learn(road, np.array([10.0, 0.0]), 1500.0)
     assert not bias.along_observed
     assert np.allclose(bias.offset, 0.0)
-    along_sigma = float(np.sqrt(bias.cov[0, 0]))
+    along_sigma = float(np.sqrt(bias.measured_cov[0, 0]))
     assert along_sigma > 0.9 * ON.offset.map_bias_prior_sigma_m
 
 
@@ -92,7 +92,8 @@ def test_a_biased_map_no_longer_drags_the_estimate_off_the_road(sample: str) -> 
     opened = open_inputs(SAMPLES / f"{sample}.mcap", SAMPLES / f"{sample}.route.geojson")
     assert opened.route is not None
     inputs = Inputs(opened.log, _shifted(opened.route, 10.0, 3.5), opened.frame)
-    off = run_methods(inputs, Params(), methods=("baseline", "proposed"))
+    without_bias = with_values(Params(), {"extensions.map_bias": False})
+    off = run_methods(inputs, without_bias, methods=("baseline", "proposed"))
     on = run_methods(inputs, ON, methods=("proposed",))
 
     def rmse(run) -> float:
@@ -109,6 +110,10 @@ def test_a_biased_map_no_longer_drags_the_estimate_off_the_road(sample: str) -> 
     diagnostics = on["proposed"].matches[0].diagnostics()
     assert diagnostics["map_bias_along_m"] > 5.0
     assert diagnostics["map_bias_along_sigma_m"] > 0.0
+
+
+def test_the_bias_is_learned_by_default() -> None:
+    assert Params().extensions.map_bias
 
 
 def test_the_paper_method_learns_no_bias() -> None:
