@@ -225,11 +225,16 @@ def execute(args: argparse.Namespace) -> int:
     if not m["degraded_intervals"]:
         print("no GNSS-degraded interval in this log: the metrics are empty (use --outage)")
     for name, row in m["methods"].items():
-        r = row["route"]
+        r, truth = row["route"], row["truth"]
         rmse = "-" if r["rmse_pos_dev_m"] is None else f"{r['rmse_pos_dev_m']:.2f} m"
+        error = (
+            "no ground truth in this log"
+            if truth is None or truth.get("rmse_h_err_m") is None
+            else f"error against truth RMSE {truth['rmse_h_err_m']:.2f} m"
+        )
         print(
-            f"{name:<9} position deviation RMSE over the outages (from the "
-            f"{m['route_deviation_from']}): {rmse}"
+            f"{name:<9} over the outages: {error}; position deviation RMSE (from the "
+            f"{m['route_deviation_from']}) {rmse}"
         )
     print(
         f"match attempts {m['matches']['attempted']}, accepted {m['matches']['accepted']}; "

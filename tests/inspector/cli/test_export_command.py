@@ -27,6 +27,12 @@ def test_one_log_with_outages(bag, tmp_path, capsys):
     assert main([*argv, "--outage", "10:20", "--fps", "1", "--time-lapse", "5"]) == 0
     captured = capsys.readouterr()
     assert "wrote 15 files" in captured.out and "report.html" in captured.out
+    # the error against truth first (the log has truth), the route deviation beside it
+    doc_truth = json.loads((out / "metrics.json").read_text())["methods"]["proposed"]
+    assert (
+        f"proposed  over the outages: error against truth RMSE "
+        f"{doc_truth['truth']['rmse_h_err_m']:.2f} m; position deviation RMSE" in captured.out
+    ), captured.out
     assert "short_tunnel.mcap: replay" in captured.err  # progress on stderr
     doc = json.loads((out / "metrics.json").read_text())
     a, b = doc["degraded_intervals"][0]
