@@ -5,6 +5,7 @@ from estimator.evaluation.metrics import (
     MethodMetrics,
     deviation_series,
     format_table,
+    map_bias_notes,
     match_summary,
     method_metrics,
 )
@@ -14,6 +15,7 @@ __all__ = [
     "deviation_series",
     "distance_m",
     "format_table",
+    "map_bias_notes",
     "match_summary",
     "method_metrics",
     "results_document",

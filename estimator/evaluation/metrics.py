@@ -9,6 +9,7 @@ the vehicle.
 
 from __future__ import annotations
 
+import math
 from collections.abc import Sequence
 from dataclasses import dataclass
 from typing import Literal
@@ -349,6 +350,46 @@ def match_summary(run: Run) -> dict[str, object]:
         name = failed[0].name if failed else "other"
         rejected[name] = rejected.get(name, 0) + 1
     return {"attempted": len(run.matches), "accepted": accepted, "rejected": rejected}
+
+
+def map_bias_notes(run: Run) -> list[str]:
+    """One line per GNSS-degraded interval that was matched with a map bias
+    (``extensions.map_bias``): what the approach measured, along and across the road, and
+    whether it was applied or the route taken as right. A map the run corrected must say so:
+    the route deviation alone would call the corrected run "off the route"."""
+    notes = []
+    for a, b in run.degraded_intervals:
+        rec = next(
+            (m for m in run.matches if a <= m.t <= b and m.map_bias is not None and m.fit), None
+        )
+        if rec is None or rec.map_bias is None or rec.fit is None:
+            continue
+        bias, n = rec.map_bias, rec.fit.normal
+        t = np.array([n[1], -n[0]])
+        learned = bias.learned if np.all(np.isfinite(bias.learned)) else bias.offset
+        applied = (
+            bias.chi2 >= run.params.offset.map_bias_min_sigmas**2
+            if np.isfinite(bias.chi2)
+            else bool(np.any(bias.offset != 0.0))
+        )
+        along, across = float(t @ learned), float(n @ learned)
+        measured = (
+            f"{abs(along):.1f} m {'ahead' if along >= 0 else 'behind'} and {abs(across):.1f} m "
+            f"{'left' if across >= 0 else 'right'} of"
+        )
+        if bias.rotation_rad:
+            measured += f" (turned {math.degrees(bias.rotation_rad):+.2f} deg about)"
+        verdict = (
+            f"applied (sigma {math.sqrt(float(t @ bias.cov @ t)):.1f} m along, "
+            f"{math.sqrt(float(n @ bias.cov @ n)):.1f} m across)"
+            if applied
+            else "not significant: the route taken as right"
+        )
+        notes.append(
+            f"map bias for the outage at {a - run.t0:.1f} s: the route is drawn {measured} "
+            f"the road driven; {verdict}"
+        )
+    return notes
 
 
 _ROUTE_COLUMNS = (

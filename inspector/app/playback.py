@@ -14,6 +14,8 @@ import numpy as np
 import viser
 
 from estimator.errors import RoutefuseError
+from estimator.evaluation import map_bias_notes
+from estimator.results import Run
 from inspector.app.widgets import Event, markdown_text, show_value
 from inspector.controller import Session, format_outages
 from inspector.timeline import PLAY_SPEEDS, parse_speed
@@ -46,7 +48,17 @@ def status_markdown(s: Session) -> str:
         text += f" · GNSS removed {format_outages(s.outages)} s"
     off = s.off_route.summary() if s.off_route is not None else ""
     text = f"{text} · {off}" if off else text
-    return text + warnings_markdown(s.proposed.warnings)
+    return text + map_bias_markdown(s.proposed) + warnings_markdown(s.proposed.warnings)
+
+
+MAX_MAP_BIAS_SHOWN = 5
+
+
+def map_bias_markdown(run: Run) -> str:
+    """Where the run found the route drawn off the road driven, outage by outage (escaped),
+    so that an "off the route" summary of a corrected run is not read as a failure."""
+    notes = map_bias_notes(run)
+    return "".join(f"\n\n{markdown_text(n)}" for n in notes[:MAX_MAP_BIAS_SHOWN])
 
 
 MAX_WARNINGS_SHOWN = 5

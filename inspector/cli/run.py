@@ -209,7 +209,10 @@ def execute(args: argparse.Namespace) -> int:
 
 
 def _print_notes(runs: dict[str, Run], summaries: dict[str, dict[str, Any]]) -> None:
-    """The degraded intervals, each matching method's match counts, the runs' warnings."""
+    """The degraded intervals, each matching method's match counts and map biases, the runs'
+    warnings."""
+    from estimator.evaluation import map_bias_notes
+
     first = next(iter(runs.values()))
     intervals = [[a - first.t0, b - first.t0] for a, b in first.degraded_intervals]
     if intervals:
@@ -223,6 +226,9 @@ def _print_notes(runs: dict[str, Run], summaries: dict[str, dict[str, Any]]) -> 
             f"{method}: {s['accepted']} of {s['attempted']} matches accepted; "
             f"rejected by {rejected}"
         )
+    for method, r in runs.items():
+        for note in map_bias_notes(r):
+            print(f"{method}: {note}")
     for warning in dict.fromkeys(w for r in runs.values() for w in r.warnings):
         print(f"routefuse run: warning: {warning}", file=sys.stderr)
 

@@ -324,3 +324,34 @@ def test_deviation_series_of_the_same_run_is_computed_once():
     assert deviation_series(shifted, ROUTE, log) is not first
     lane = deviation_series(run, ROUTE, log, subtract_lane_offset=True)
     assert lane is not first
+
+
+def test_a_map_bias_the_run_applied_is_said_and_a_right_route_is_taken_as_right() -> None:
+    """The Monaco sample with its route drawn 10 m ahead and 3.5 m left of the road (along
+    and across the route's overall direction): the note names the outage and a bias applied
+    within a few metres of that; on the right route, a bias not significant."""
+    import dataclasses
+    from pathlib import Path
+
+    from estimator.evaluation import map_bias_notes
+    from estimator.pipeline import open_inputs, run_methods
+    from estimator.route import Route
+
+    samples = Path(__file__).resolve().parents[3] / "sample_logs"
+    inputs = open_inputs(samples / "monaco_tunnel.mcap", samples / "monaco_tunnel.route.geojson")
+    assert inputs.route is not None
+    xy = inputs.route.xy
+    u = (xy[-1] - xy[0]) / np.hypot(*(xy[-1] - xy[0]))
+    moved = Route(xy + 10.0 * u + 3.5 * np.array([-u[1], u[0]]), name="moved")
+    (note,) = map_bias_notes(
+        run_methods(dataclasses.replace(inputs, route=moved), Params(), methods=("proposed",))[
+            "proposed"
+        ]
+    )
+    assert note.startswith("map bias for the outage at 108.4 s: the route is drawn ")
+    assert "ahead" in note and "left of the road driven; applied (sigma" in note
+    ahead = float(note.split("drawn ")[1].split(" m ahead")[0])
+    left = float(note.split("ahead and ")[1].split(" m left")[0])
+    assert np.hypot(ahead, left) == pytest.approx(np.hypot(10.0, 3.5), abs=3.0)
+    (right,) = map_bias_notes(run_methods(inputs, Params(), methods=("proposed",))["proposed"])
+    assert right.endswith("not significant: the route taken as right")

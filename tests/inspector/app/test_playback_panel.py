@@ -83,7 +83,9 @@ def test_the_status_line_lists_the_logs_warnings_escaped_and_bounded():
         timeline=timeline,
         outages=(),
         off_route=None,
-        proposed=SimpleNamespace(warnings=("wheel speed looks like km/h",)),
+        proposed=SimpleNamespace(
+            warnings=("wheel speed looks like km/h",), degraded_intervals=(), matches=()
+        ),
     )
     line = status_markdown(session)  # type: ignore[arg-type]
     assert "1 warning about this log" in line and "km/h" in line
