@@ -309,7 +309,7 @@ def learn_map_bias(
         return prior
     total = C + G @ track_cov @ G.T
     rotated = u[3] ** 2 / total[3, 3] >= op.map_bias_min_sigmas**2
-    turned = (u, C, G, total)
+    full = (u, C, G, total)
     if not rotated:
         # a rotation no test tells from zero is not applied, nor does its sigma, extrapolated
         # from the approach into a long tunnel, swamp the bias learned at the portal
@@ -321,14 +321,14 @@ def learn_map_bias(
             op.map_bias_turned_rescue
             and _least_bias_ahead(route, end_s, end, u[1:3], 0.0, params)
             > op.map_bias_max_prior_sigmas
-            and _least_bias_ahead(route, end_s, end, turned[0][1:3], float(turned[0][3]), params)
+            and _least_bias_ahead(route, end_s, end, full[0][1:3], float(full[0][3]), params)
             <= op.map_bias_max_prior_sigmas
-            and abs(turned[0][0]) <= op.max_offset_m
+            and abs(full[0][0]) <= op.max_offset_m
         ):
             # a shift too large for a map's unless the map is turned, and the rotation, if
             # not significant, is what makes it one: a map drawn turned about a point far into
             # the tunnel is metres off at the portal, and a parallel road is off everywhere
-            u, C, G, total = turned
+            u, C, G, total = full
             rotated = True
     b, Cb = u[1:3], total[1:3, 1:3]
     chi2 = float(b @ np.linalg.solve(Cb, b))
@@ -486,5 +486,6 @@ def refined_bias(
         measured=offset,
         measured_cov=b_total,
         chi2=float(offset @ np.linalg.solve(b_total, offset)),
-        along_observed=math.sqrt(float(t_end @ C[1:, 1:] @ t_end)) < 0.5 * op.map_bias_prior_sigma_m,
+        along_observed=math.sqrt(float(t_end @ C[1:, 1:] @ t_end))
+        < 0.5 * op.map_bias_prior_sigma_m,
     )

@@ -69,8 +69,8 @@ from estimator.matching.map_bias import (
     MapBias,
     carried_bias,
     learn_map_bias,
-    refined_bias,
     prior_bias,
+    refined_bias,
     unbiased,
 )
 from estimator.matching.reanchor import should_reanchor, within_drift
