@@ -324,9 +324,10 @@ def learn_map_bias(
             and _least_bias_ahead(route, end_s, end, full[0][1:3], float(full[0][3]), params)
             <= op.map_bias_max_prior_sigmas
             and abs(full[0][0]) <= op.max_offset_m
+            and full[0][3] ** 2 / full[3][3, 3] >= 4.0
         ):
-            # a shift too large for a map's unless the map is turned, and the rotation, if
-            # not significant, is what makes it one: a map drawn turned about a point far into
+            # a shift too large for a map's unless the map is turned, and the rotation, at
+            # two sigmas if not three, is what makes it one: a map drawn turned about a point far into
             # the tunnel is metres off at the portal, and a parallel road is off everywhere
             u, C, G, total = full
             rotated = True

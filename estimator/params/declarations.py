@@ -363,7 +363,7 @@ class OffsetParams:
     map_bias_turned_rescue: bool = param(
         True,
         "a bias that the test for another road (offset.map_bias_max_prior_sigmas) refuses as a "
-        "shift but passes with the fitted rotation, however small its significance, is applied "
+        "shift but passes with the fitted rotation, two sigmas from zero if not three, is applied "
         "with that rotation and its sigma (a map drawn turned about a point far into a long "
         "tunnel is metres off at the portal)",
     )
