@@ -327,8 +327,8 @@ def learn_map_bias(
             and full[0][3] ** 2 / full[3][3, 3] >= 4.0
         ):
             # a shift too large for a map's unless the map is turned, and the rotation, at
-            # two sigmas if not three, is what makes it one: a map drawn turned about a point far into
-            # the tunnel is metres off at the portal, and a parallel road is off everywhere
+            # two sigmas if not three, is what makes it one: a map drawn turned about a point
+            # far into the tunnel is metres off at the portal, a parallel road everywhere
             u, C, G, total = full
             rotated = True
     b, Cb = u[1:3], total[1:3, 1:3]
