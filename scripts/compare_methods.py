@@ -90,6 +90,7 @@ BIASED_RUNS = {
     "baseline": ("baseline", {}),
     "routefuse": ("proposed", {}),
     "routefuse, `map_bias` off": ("proposed", {"extensions.map_bias": False}),
+    "routefuse, `offset.map_bias_refine` off": ("proposed", {"offset.map_bias_refine": False}),
     "routefuse + `reanchor`": ("proposed", {"extensions.reanchor": True}),
     "routefuse + `reanchor`, `map_bias` off": (
         "proposed",

@@ -309,6 +309,7 @@ def learn_map_bias(
         return prior
     total = C + G @ track_cov @ G.T
     rotated = u[3] ** 2 / total[3, 3] >= op.map_bias_min_sigmas**2
+    full = (u, C, G, total)
     if not rotated:
         # a rotation no test tells from zero is not applied, nor does its sigma, extrapolated
         # from the approach into a long tunnel, swamp the bias learned at the portal
@@ -316,6 +317,20 @@ def learn_map_bias(
         u, C, G = np.append(u3, 0.0), np.zeros((4, 4)), np.zeros((4, 2))
         C[:3, :3], G[:3] = C3, G3
         total = C + G @ track_cov @ G.T
+        if (
+            op.map_bias_turned_rescue
+            and _least_bias_ahead(route, end_s, end, u[1:3], 0.0, params)
+            > op.map_bias_max_prior_sigmas
+            and _least_bias_ahead(route, end_s, end, full[0][1:3], float(full[0][3]), params)
+            <= op.map_bias_max_prior_sigmas
+            and abs(full[0][0]) <= op.max_offset_m
+            and full[0][3] ** 2 / full[3][3, 3] >= 4.0
+        ):
+            # a shift too large for a map's unless the map is turned, and the rotation, at
+            # two sigmas if not three, is what makes it one: a map drawn turned about a point
+            # far into the tunnel is metres off at the portal, a parallel road everywhere
+            u, C, G, total = full
+            rotated = True
     b, Cb = u[1:3], total[1:3, 1:3]
     chi2 = float(b @ np.linalg.solve(Cb, b))
     t_end = np.array([normal_end[1], -normal_end[0]])
@@ -388,4 +403,90 @@ def carried_bias(
         lane=float(lane_seen + normal @ here),
         gain=gain,
         cov=cov,
+    )
+
+
+def refined_bias(
+    track_xy: F64,
+    track_cov: F64,
+    route: Route,
+    *,
+    carried: MapBias,
+    s_guess: float,
+    params: Params,
+    track_var: F64 | None = None,
+) -> MapBias:
+    """The bias ``carried`` from the previous outage (:func:`carried_bias`), refined by the
+    GNSS-good driving since (``track_xy`` (N, 2), ending at the vehicle; ``track_cov``,
+    ``track_var`` and ``s_guess`` as for :func:`learn_map_bias`) when it is too short to learn
+    the bias afresh. Every GNSS-good stretch between tunnels measures the map's bias anew,
+    with the receiver's wander of its own time, not the approach's: where the stretch turns,
+    its cross-track distances and its shape fix the along-track bias, which the outage's
+    matches cannot (they see the position and the map's error only together). The carried
+    bias is the prior of the same least-squares fit, with the route moved back by it; its
+    rotation is kept. A stretch that does not follow the moved-back route (residual above
+    ``offset.map_bias_max_residual_m``, or a lane beyond ``offset.max_offset_m``) leaves
+    ``carried`` as it is."""
+    op = params.offset
+    xy = np.asarray(track_xy, np.float64)[:, :2]
+    if not carried.significant or len(xy) < 2:
+        return carried
+    moved = Route(carried.moved_back(route.xy, carried.offset))
+    end = xy[-1]
+    end_s = float(moved.project(end[None, :], s_guess, params.window.route_search_m).s[0])
+    keep = _thin(xy, params.window.spacing_m)
+    pts = xy[keep]
+    step = np.hypot(*np.diff(pts, axis=0).T)
+    back = np.concatenate([np.cumsum(step[::-1])[::-1], [0.0]])
+    proj = moved.project(pts, end_s - back, params.window.route_search_m)
+    inside = (proj.s > 1e-6) & (proj.s < moved.length - 1e-6)
+    if np.count_nonzero(inside) < 5:
+        return carried
+    span = float(back[0])
+    d = proj.lateral[inside]
+    nrm = moved.normal_at(proj.s[inside])
+    A = np.column_stack([np.ones(len(d)), -nrm])
+    n_eff = max(span / params.window.length_m, 1.0)
+    var = np.full(len(d), len(d) * params.pseudo.shape_noise_m**2 / n_eff)
+    if track_var is not None:
+        v = np.asarray(track_var, np.float64)[keep][inside]
+        var += np.maximum(v - 0.5 * float(np.trace(track_cov)), 0.0)
+    weights = 1.0 / var
+    n_lateral = len(d)
+    P0 = np.zeros((3, 3))
+    P0[0, 0] = op.map_bias_lane_sigma_m**2
+    P0[1:, 1:] = carried.cov[1:, 1:]
+    mean = np.array([op.map_bias_lane_prior_m, 0.0, 0.0])
+    u1 = _solve(A, d, weights, P0, nrm, mean)[0]
+    again = Route(xy_moved_back(moved.xy, u1[1:], 0.0, end))
+    s_again = float(again.project(end[None, :], end_s, params.window.route_search_m).s[0])
+    along = _along_by_shape(xy, track_cov, again, s_guess=s_again, lane=float(u1[0]), params=params)
+    if along is not None:
+        y, tangent, along_var = along
+        A = np.vstack([A, np.concatenate([[0.0], tangent])])
+        d = np.append(d, y + float(tangent @ u1[1:]))
+        nrm = np.vstack([nrm, -tangent])
+        weights = np.append(weights, 1.0 / along_var)
+    u, C, G = _solve(A, d, weights, P0, nrm, mean)
+    residual = float(np.sqrt(np.mean((d[:n_lateral] - A[:n_lateral] @ u) ** 2)))
+    if not np.isfinite(residual) or residual > op.map_bias_max_residual_m:
+        return carried
+    if abs(u[0]) > op.max_offset_m:
+        return carried
+    offset = carried.offset + u[1:]
+    total = C + G @ track_cov @ G.T
+    b_total = total[1:, 1:]
+    normal_end = moved.normal_at(np.array([end_s]))[0]
+    t_end = np.array([normal_end[1], -normal_end[0]])
+    return dataclasses.replace(
+        carried,
+        offset=offset,
+        lane=float(u[0]),
+        gain=G,
+        cov=C,
+        measured=offset,
+        measured_cov=b_total,
+        chi2=float(offset @ np.linalg.solve(b_total, offset)),
+        along_observed=math.sqrt(float(t_end @ C[1:, 1:] @ t_end))
+        < 0.5 * op.map_bias_prior_sigma_m,
     )

@@ -354,6 +354,19 @@ class OffsetParams:
         "map bias's errors (a bend tells a sideways map shift from a lane; else they are only "
         "considered)",
     )
+    map_bias_refine: bool = param(
+        True,
+        "where the GNSS-good driving since the previous outage is too short to learn the map's "
+        "bias afresh, refine the previous outage's bias with it (a stretch that turns fixes the "
+        "along-track bias the outage's matches cannot) instead of carrying it unchanged",
+    )
+    map_bias_turned_rescue: bool = param(
+        True,
+        "a bias that the test for another road (offset.map_bias_max_prior_sigmas) refuses as a "
+        "shift but passes with the fitted rotation, two sigmas from zero if not three, is applied "
+        "with that rotation and its sigma (a map drawn turned about a point far into a long "
+        "tunnel is metres off at the portal)",
+    )
     map_bias_max_residual_m: float = param(
         3.0,
         "a GNSS track fitting the route worse than this (RMS) teaches no bias (another road)",

@@ -70,6 +70,7 @@ from estimator.matching.map_bias import (
     carried_bias,
     learn_map_bias,
     prior_bias,
+    refined_bias,
     unbiased,
 )
 from estimator.matching.reanchor import should_reanchor, within_drift
@@ -395,22 +396,66 @@ class Driver:
                         bias,
                         offset,
                         position=x[:2].copy(),
-                        lane_seen=tr.lane,
+                        lane_seen=self._offset_seen(rows, used, t_a, s_last),
                         normal=normal,
                         metres=float(aux[A_DIST]) - pivot_dist,
                         params=self.p,
                     )
+                    track = self._bias_track(rows, last)
+                    if self.p.offset.map_bias_refine and track is not None:
+                        tr.bias = refined_bias(
+                            track[:, O_POS : O_POS + 2],
+                            np.diag(track[-1, O_SIG_POS : O_SIG_POS + 2] ** 2),
+                            self.route,
+                            carried=tr.bias,
+                            s_guess=s_last,
+                            params=self.p,
+                            track_var=0.5 * np.sum(track[:, O_SIG_POS : O_SIG_POS + 2] ** 2, 1),
+                        )
                 else:
                     tr.bias = unbiased(self.p, lane=tr.lane, normal=normal, learned=bias)
             tr.lane = tr.bias.lane
+
+    def _offset_seen(self, rows: F64, used: NDArray[np.bool_], t_a: float, s_last: float) -> float:
+        """The cross-track offset from the route learned near the portal, lane and map together,
+        however large: a map shifted sideways puts it beyond ``offset.max_offset_m``, where
+        :func:`learn_lane_offset` returns 0."""
+        op = dataclasses.replace(self.p.offset, max_offset_m=math.inf)
+        return learn_lane_offset(
+            rows[:, O_T],
+            rows[:, O_POS : O_POS + 2],
+            used,
+            self.route,
+            t_end=t_a,
+            params=dataclasses.replace(self.p, offset=op),
+            s_guess=s_last,
+        )
 
     def _learn_bias(self, rows: F64, last: NDArray[np.intp], s_last: float) -> MapBias:
         """The map bias from the estimate over the last ``offset.map_bias_track_m`` of travel
         up to the last epoch a fix was used in (:func:`learn_map_bias`)."""
         lane = self.track.lane
         prior = prior_bias(self.p, lane=lane, normal=self.route.normal_at(np.array([s_last]))[0])
-        if not len(last):
+        track = self._bias_track(rows, last)
+        if track is None:
             return prior
+        self.track.pivot_dist = float(track[-1, O_DIST])
+        return learn_map_bias(
+            track[:, O_POS : O_POS + 2],
+            np.diag(track[-1, O_SIG_POS : O_SIG_POS + 2] ** 2),
+            self.route,
+            s_guess=s_last,
+            lane_offset=self.track.lane,
+            params=self.p,
+            track_var=0.5 * np.sum(track[:, O_SIG_POS : O_SIG_POS + 2] ** 2, axis=1),
+        )
+
+    def _bias_track(self, rows: F64, last: NDArray[np.intp]) -> F64 | None:
+        """The output rows of the GNSS-good driving the map bias is learned from: the last
+        ``offset.map_bias_track_m`` of travel up to the last epoch a fix was used in, after
+        the estimate settled from the previous outage; None with under five fixes."""
+        if not len(last):
+            return None
         end = int(last[-1])
         d = rows[: end + 1, O_DIST]
         i0 = int(search_right(d, float(d[end]) - self.p.offset.map_bias_track_m))
@@ -422,18 +467,8 @@ class Driver:
             i0 = max(i0, int(np.searchsorted(rows[: end + 1, O_T], settled, side="right")))
         track = rows[i0 : end + 1]
         if np.count_nonzero(track[:, O_GNSS] > 0) < 5:
-            return prior
-        sig = track[-1, O_SIG_POS : O_SIG_POS + 2]
-        self.track.pivot_dist = float(d[end])
-        return learn_map_bias(
-            track[:, O_POS : O_POS + 2],
-            np.diag(sig**2),
-            self.route,
-            s_guess=s_last,
-            lane_offset=self.track.lane,
-            params=self.p,
-            track_var=0.5 * np.sum(track[:, O_SIG_POS : O_SIG_POS + 2] ** 2, axis=1),
-        )
+            return None
+        return track
 
     def _window(self, out: F64, n_out: int, x: F64, aux: F64, length_m: float) -> F64:
         """The DR track over the last ``length_m`` of travel, integrated from the mechanised
