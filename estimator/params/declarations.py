@@ -469,6 +469,14 @@ class ExtensionParams:
         "GNSS-good track before each outage, take pseudo-positions from the route moved back by "
         "it, and carry its uncertainty, shared by all of an outage's matches, in their covariance",
     )
+    unapplied_bias_consider: bool = param(
+        True,
+        "when the map bias learned before an outage is not applied (not significant, or too "
+        "large for a map's error), its pseudo-positions still carry the bias seen as a "
+        "considered map error shared by all of the outage's matches (the measured bias's "
+        "second moment less its own covariance): a test that fails to reject zero is no "
+        "evidence that the map is exact",
+    )
 
 
 @dataclass(frozen=True)

@@ -415,6 +415,8 @@ class Driver:
                 else:
                     tr.bias = unbiased(self.p, lane=tr.lane, normal=normal, learned=bias)
             tr.lane = tr.bias.lane
+            if self.p.extensions.unapplied_bias_consider:
+                tr.bias = unapplied_considered(tr.bias)
 
     def _offset_seen(self, rows: F64, used: NDArray[np.bool_], t_a: float, s_last: float) -> float:
         """The cross-track offset from the route learned near the portal, lane and map together,
@@ -696,6 +698,27 @@ class Driver:
 
     def epochs(self) -> Epochs:
         return epochs_of(self.filt.out, self.filt.n_out, self.inp.degraded)
+
+
+def unapplied_considered(bias: MapBias) -> MapBias:
+    """``bias`` with, when it was learned but not applied, the bias seen added to the
+    map-bias error the outage's pseudo-positions carry (``extensions.unapplied_bias_consider``).
+
+    Not applying a bias that the significance test (or the test for another road) did not
+    accept takes the map as right, and with ``offset.map_bias_null_sigma_m`` as exact: every
+    pseudo-position then claims the shape noise alone, while the road may lie where the
+    approach showed it. The map's error is estimated by the method of moments: the second
+    moment of what was measured, ``m m^T``, less what the measurement's own covariance ``C``
+    explains (negative directions dropped), so a right map whose bias is within its noise
+    gains nothing. As a considered state (never estimated) it is shared by all of the
+    outage's matches, so repeating them does not average it away."""
+    m, c = bias.measured, bias.measured_cov
+    if bias.significant or not (np.all(np.isfinite(m)) and np.all(np.isfinite(c))):
+        return bias
+    w, v = np.linalg.eigh(np.outer(m, m) - 0.5 * (c + c.T))
+    cov = bias.cov.copy()
+    cov[1:, 1:] += (v * np.maximum(w, 0.0)) @ v.T
+    return dataclasses.replace(bias, cov=cov)
 
 
 def widen_to_innovation(P: F64, y: F64, s: F64) -> None:
