@@ -477,6 +477,14 @@ class ExtensionParams:
         "second moment less its own covariance): a test that fails to reject zero is no "
         "evidence that the map is exact",
     )
+    map_turn_consider: bool = param(
+        True,
+        "carry the map's rotation error (the applied rotation's variance, or the second "
+        "moment of one fitted on the approach but not applied) as a considered state of the "
+        "outage's pseudo-positions: the map's error grows with the distance from where the bias "
+        "was learned as one quantity shared by all of the outage's matches, instead of as a "
+        "random walk that repeated matches average away while they turn the heading to the map's",
+    )
 
 
 @dataclass(frozen=True)
