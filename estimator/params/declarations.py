@@ -482,8 +482,9 @@ class ExtensionParams:
         "carry the map's rotation error (the applied rotation's variance, or the second "
         "moment of one fitted on the approach but not applied) as a considered state of the "
         "outage's pseudo-positions: the map's error grows with the distance from where the bias "
-        "was learned as one quantity shared by all of the outage's matches, instead of as a "
-        "random walk that repeated matches average away while they turn the heading to the map's",
+        "was learned as one quantity shared by all of the outage's matches, beside the random "
+        "walk (which repeated matches average away while they turn the heading to the map's, "
+        "but which lets them re-estimate an applied bias where the road turns)",
     )
 
 

@@ -340,8 +340,6 @@ class Driver:
         walk = self.p.offset.map_bias_walk_m_per_sqrt_km
         far, near = d - self.track.pivot_dist, before - self.track.pivot_dist
         turn = bias.rotation_sigma**2 * (far * far - near * near)
-        if self.p.extensions.map_turn_consider:
-            turn = 0.0  # carried by E_ROT (turn_map_bias), shared by the outage's matches
         return float(walk**2 * (d - before) / 1000.0 + max(turn, 0.0))
 
     def _checkpoint(
