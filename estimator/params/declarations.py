@@ -360,6 +360,12 @@ class OffsetParams:
         "bias afresh, refine the previous outage's bias with it (a stretch that turns fixes the "
         "along-track bias the outage's matches cannot) instead of carrying it unchanged",
     )
+    map_bias_turn_walk: bool = param(
+        True,
+        "an applied rotation's uncertainty also grows the map-bias error as a random walk, "
+        "beside extensions.map_turn_consider (the walk lets the outage's matches re-estimate "
+        "the bias where the road turns; off, the considered rotation alone carries it)",
+    )
     map_bias_turned_rescue: bool = param(
         False,
         "a bias that the test for another road (offset.map_bias_max_prior_sigmas) refuses as a "

@@ -340,6 +340,8 @@ class Driver:
         walk = self.p.offset.map_bias_walk_m_per_sqrt_km
         far, near = d - self.track.pivot_dist, before - self.track.pivot_dist
         turn = bias.rotation_sigma**2 * (far * far - near * near)
+        if self.p.extensions.map_turn_consider and not self.p.offset.map_bias_turn_walk:
+            turn = 0.0  # carried by E_ROT alone (turn_map_bias)
         return float(walk**2 * (d - before) / 1000.0 + max(turn, 0.0))
 
     def _checkpoint(
