@@ -37,7 +37,8 @@ E_GW = 16  # (3)
 # considered states (Schmidt: never corrected, their gain is zero) come last, from E_LANE on
 E_LANE = 19  # the lane-offset error the route pseudo-positions keep
 E_MAP = 20  # (2) the map-bias error E, N the route pseudo-positions keep (extensions.map_bias)
-NE = 22
+E_ROT = 22  # the map's rotation error (rad), always considered (extensions.map_turn_consider)
+NE = 23
 
 # aux: bookkeeping
 A_TIME = 0  # time of the state: the last IMU sample processed
@@ -63,7 +64,8 @@ A_CHAIN_DR = 37  # (2) the DR track at it
 A_USED_DIST = 39  # A_DIST at the last fix used
 A_ROUTE = 40  # (3) lane-offset and map-bias (E, N) errors estimated since the outage start
 A_ROUTE_EST = 43  # 1: this outage's route pseudo-positions estimate them
-NA = 44
+A_MAP_AT = 44  # (2) E, N where E_MAP is the map-bias error (E_ROT turns it elsewhere)
+NA = 46
 
 # idx
 I_IMU, I_WHEEL, I_GNSS, I_OUT, NI = 0, 1, 2, 3, 4

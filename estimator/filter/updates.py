@@ -17,6 +17,7 @@ from estimator.filter.layout import (
     A_GYRO_N,
     A_GYRO_SUM,
     A_INFLATE,
+    A_MAP_AT,
     A_ROUTE,
     A_ROUTE_EST,
     C_AID_DT,
@@ -34,6 +35,7 @@ from estimator.filter.layout import (
     E_LANE,
     E_MAP,
     E_POS,
+    E_ROT,
     E_SCALE,
     E_VEL,
     NE,
@@ -146,7 +148,8 @@ def _apply_gain(
     # the states from E_LANE up to last_considered (the lane-offset and map-bias errors, but
     # for the map bias where a route pseudo-position estimates it) are considered, not
     # estimated (Schmidt): their gain is zero, and as the last states the symmetric update
-    # below then leaves their covariance as it was
+    # below then leaves their covariance as it was; the map's rotation error E_ROT is always
+    # considered
     for i in range(NE):
         for a in range(m):
             acc = 0.0
@@ -156,8 +159,10 @@ def _apply_gain(
     for i in range(E_LANE, last_considered):
         for a in range(m):
             K[i, a] = 0.0
+    for a in range(m):
+        K[E_ROT, a] = 0.0
     for i in range(NE):
-        considered = E_LANE <= i < last_considered
+        considered = E_LANE <= i < last_considered or i == E_ROT
         for j in range(i, NE):
             acc = 0.0
             for a in range(m):
@@ -406,6 +411,40 @@ def grow_map_bias(P: F64, var: float) -> None:
     """The map's bias changes along the road: add ``var`` (m^2) to each axis of its error."""
     for i in range(2):
         P[E_MAP + i, E_MAP + i] += var
+
+
+@kernel
+def clone_map_turn(P: F64, aux: F64, x: F64, var: float) -> None:
+    """Start an outage's map-rotation error (``E_ROT``, rad) with variance ``var``,
+    independent of every other state, and make the map-bias error ``E_MAP`` the one at the
+    vehicle's position (:func:`turn_map_bias` carries it along)."""
+    for j in range(NE):
+        P[E_ROT, j] = 0.0
+        P[j, E_ROT] = 0.0
+    P[E_ROT, E_ROT] = var
+    aux[A_MAP_AT] = x[X_POS]
+    aux[A_MAP_AT + 1] = x[X_POS + 1]
+
+
+@kernel
+def turn_map_bias(P: F64, aux: F64, x: F64) -> None:
+    """Make the map-bias error ``E_MAP`` the one at the vehicle's position: a map turned by
+    ``E_ROT`` about any point is off by ``E_ROT J d`` more ``d`` further along (``J`` a
+    quarter turn), so ``E_MAP <- E_MAP + J d E_ROT`` with ``d`` the move since the last call
+    (``P <- T P T^T``). Unlike a random walk of the map-bias error, the growth is one
+    quantity shared by all of the outage's matches: repeating them does not average it away,
+    and a heading turned to the map's stays as uncertain as the map's rotation."""
+    d0 = x[X_POS] - aux[A_MAP_AT]
+    d1 = x[X_POS + 1] - aux[A_MAP_AT + 1]
+    v0, v1 = -d1, d0  # J d
+    for j in range(NE):
+        P[E_MAP, j] += v0 * P[E_ROT, j]
+        P[E_MAP + 1, j] += v1 * P[E_ROT, j]
+    for j in range(NE):
+        P[j, E_MAP] += v0 * P[j, E_ROT]
+        P[j, E_MAP + 1] += v1 * P[j, E_ROT]
+    aux[A_MAP_AT] = x[X_POS]
+    aux[A_MAP_AT + 1] = x[X_POS + 1]
 
 
 @kernel

@@ -91,6 +91,10 @@ class MapBias:
     """``measured`` against zero (NaN when nothing was learned)"""
     along_observed: bool
     """the track fixed the along-track bias to better than half its prior"""
+    turn_var: float = 0.0
+    """variance of the map's rotation error, rad^2: the applied rotation's, or the second
+    moment of one fitted but not applied (its square less its own variance); the outage's
+    pseudo-positions carry it as a considered state (``extensions.map_turn_consider``)"""
 
     @property
     def significant(self) -> bool:
@@ -121,6 +125,7 @@ def _result(
     chi2: float = math.nan,
     along_observed: bool = False,
     pivot: F64 | None = None,
+    turn_var: float = 0.0,
 ) -> MapBias:
     """No bias applied: the lane offset ``lane`` learned near the portal (its error the
     position error across ``normal``), the map-bias error of covariance ``map_cov``."""
@@ -140,6 +145,7 @@ def _result(
         measured_cov=np.full((2, 2), np.nan) if measured_cov is None else measured_cov,
         chi2=chi2,
         along_observed=along_observed,
+        turn_var=turn_var,
     )
 
 
@@ -310,7 +316,11 @@ def learn_map_bias(
     total = C + G @ track_cov @ G.T
     rotated = u[3] ** 2 / total[3, 3] >= op.map_bias_min_sigmas**2
     full = (u, C, G, total)
+    turn_var = float(C[3, 3])
     if not rotated:
+        # a rotation not applied leaves the map turned by what the fit saw, less what its own
+        # noise explains (a right map within its noise gains nothing)
+        turn_var = max(float(u[3] ** 2 - total[3, 3]), 0.0)
         # a rotation no test tells from zero is not applied, nor does its sigma, extrapolated
         # from the approach into a long tunnel, swamp the bias learned at the portal
         u3, C3, G3 = _solve(A[:, :3], d, weights, P0[:3, :3], nrm, mean[:3])
@@ -331,6 +341,7 @@ def learn_map_bias(
             # far into the tunnel is metres off at the portal, a parallel road everywhere
             u, C, G, total = full
             rotated = True
+            turn_var = float(C[3, 3])
     b, Cb = u[1:3], total[1:3, 1:3]
     chi2 = float(b @ np.linalg.solve(Cb, b))
     t_end = np.array([normal_end[1], -normal_end[0]])
@@ -355,6 +366,7 @@ def learn_map_bias(
             chi2=chi2,
             along_observed=along_observed,
             pivot=end,
+            turn_var=turn_var,
         )
     return MapBias(
         offset=b,
@@ -368,6 +380,7 @@ def learn_map_bias(
         measured_cov=Cb,
         chi2=chi2,
         along_observed=along_observed,
+        turn_var=turn_var,
     )
 
 

@@ -360,6 +360,12 @@ class OffsetParams:
         "bias afresh, refine the previous outage's bias with it (a stretch that turns fixes the "
         "along-track bias the outage's matches cannot) instead of carrying it unchanged",
     )
+    map_bias_turn_walk: bool = param(
+        True,
+        "an applied rotation's uncertainty also grows the map-bias error as a random walk, "
+        "beside extensions.map_turn_consider (the walk lets the outage's matches re-estimate "
+        "the bias where the road turns; off, the considered rotation alone carries it)",
+    )
     map_bias_turned_rescue: bool = param(
         False,
         "a bias that the test for another road (offset.map_bias_max_prior_sigmas) refuses as a "
@@ -476,6 +482,15 @@ class ExtensionParams:
         "considered map error shared by all of the outage's matches (the measured bias's "
         "second moment less its own covariance): a test that fails to reject zero is no "
         "evidence that the map is exact",
+    )
+    map_turn_consider: bool = param(
+        True,
+        "carry the map's rotation error (the applied rotation's variance, or the second "
+        "moment of one fitted on the approach but not applied) as a considered state of the "
+        "outage's pseudo-positions: the map's error grows with the distance from where the bias "
+        "was learned as one quantity shared by all of the outage's matches, beside the random "
+        "walk (which repeated matches average away while they turn the heading to the map's, "
+        "but which lets them re-estimate an applied bias where the road turns)",
     )
 
 

@@ -54,7 +54,13 @@ from estimator.filter.portal import advance_to_outage
 from estimator.filter.propagation import flush_covariance
 from estimator.filter.route_update import applied_obs_cov, apply_route_match
 from estimator.filter.setup import FilterInputs, prepare_inputs
-from estimator.filter.updates import clone_lane_offset, clone_route_errors, grow_map_bias
+from estimator.filter.updates import (
+    clone_lane_offset,
+    clone_map_turn,
+    clone_route_errors,
+    grow_map_bias,
+    turn_map_bias,
+)
 from estimator.log import Log
 from estimator.matching import (
     MatchGeometry,
@@ -299,6 +305,8 @@ class Driver:
                 elif self.p.extensions.lane_offset_state and self.track.s is not None:
                     t = self.route.tangent_at(self.track.s)[0]
                     clone_lane_offset(f.P, f.aux, self.inp.cfg, np.array([-t[1], t[0]]))
+                turn = bias is not None and self.p.extensions.map_turn_consider
+                clone_map_turn(f.P, f.aux, f.x, bias.turn_var if bias is not None and turn else 0.0)
             while True:
                 t_try = a + tr.min_outage_s + k * tr.interval_s
                 if t_try >= b or t_try > self.inp.imu_t[-1]:
@@ -311,6 +319,8 @@ class Driver:
                     if not redo:
                         if self.track.bias is not None and self.track.bias.significant:
                             grow_map_bias(f.P, self._bias_growth(d, dist_last, dist_a))
+                        if self.p.extensions.map_turn_consider:
+                            turn_map_bias(f.P, f.aux, f.x)
                         self._checkpoint("attempt", i, k, dist_a, dist_last)
                     self._attempt_live()
                     dist_last = d
@@ -330,6 +340,8 @@ class Driver:
         walk = self.p.offset.map_bias_walk_m_per_sqrt_km
         far, near = d - self.track.pivot_dist, before - self.track.pivot_dist
         turn = bias.rotation_sigma**2 * (far * far - near * near)
+        if self.p.extensions.map_turn_consider and not self.p.offset.map_bias_turn_walk:
+            turn = 0.0  # carried by E_ROT alone (turn_map_bias)
         return float(walk**2 * (d - before) / 1000.0 + max(turn, 0.0))
 
     def _checkpoint(
@@ -550,7 +562,7 @@ class Driver:
             offset, _ = self._route_estimate(aux)
             used = MapBiasUse(
                 offset,
-                P[E_MAP:, E_MAP:].copy(),
+                P[E_MAP : E_MAP + 2, E_MAP : E_MAP + 2].copy(),
                 bias.along_observed,
                 learned=bias.measured,
                 chi2=bias.chi2,

@@ -144,8 +144,10 @@ def test_a_pseudo_position_estimates_the_route_errors_when_the_bias_is_applied()
     H[:, layout.E_LANE] = -n
     H[:, layout.E_MAP : layout.E_MAP + 2] = np.eye(2)
     K = P @ H.T @ np.linalg.inv(H @ P @ H.T + R)
+    K[layout.E_ROT] = 0.0  # the map's rotation error stays considered
     dx = K @ (z - x[:2])
-    P_exp = P - K @ H @ P
+    I_KH = np.eye(layout.NE) - K @ H
+    P_exp = I_KH @ P @ I_KH.T + K @ R @ K.T
     aux = np.zeros(layout.NA)
     aux[layout.A_ROUTE_EST] = 1.0
     aux[layout.A_ROUTE : layout.A_ROUTE + 3] = [0.5, 1.0, -1.0]
@@ -153,7 +155,7 @@ def test_a_pseudo_position_estimates_the_route_errors_when_the_bias_is_applied()
     np.testing.assert_allclose(P, P_exp, rtol=1e-10, atol=1e-12)
     np.testing.assert_allclose(
         aux[layout.A_ROUTE : layout.A_ROUTE + 3],
-        np.array([0.5, 1.0, -1.0]) + dx[layout.E_LANE :],
+        np.array([0.5, 1.0, -1.0]) + dx[layout.E_LANE : layout.E_LANE + 3],
         rtol=1e-12,
     )
     # the same update with the bias not applied only considers them
@@ -175,7 +177,7 @@ def test_the_route_errors_start_as_the_position_error_through_the_gain_and_grow(
     gain = rng.standard_normal((3, 2))
     cov = np.array([[1.0, 0.2, 0.0], [0.2, 9.0, 2.0], [0.0, 2.0, 4.0]])
     updates.clone_route_errors(P, aux, cfg, gain, cov, True)
-    pos, route = slice(layout.E_POS, layout.E_POS + 2), slice(layout.E_LANE, layout.NE)
+    pos, route = slice(layout.E_POS, layout.E_POS + 2), slice(layout.E_LANE, layout.E_LANE + 3)
     np.testing.assert_allclose(
         P[route, : layout.E_LANE], gain @ before[pos, : layout.E_LANE], rtol=1e-12
     )

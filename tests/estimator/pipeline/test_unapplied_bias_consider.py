@@ -80,5 +80,11 @@ def test_a_map_turned_in_a_long_tunnel_is_no_worse_than_dead_reckoning() -> None
     rmse, nees = _truth_figures(0, "proposed", {key: True})
     assert rmse <= base_rmse + 0.2
     assert nees <= CHI2_2DOF_95
-    off_rmse, off_nees = _truth_figures(0, "proposed", {key: False})
-    assert off_rmse > base_rmse + 0.2 and off_nees > CHI2_2DOF_95
+    off_rmse, _ = _truth_figures(0, "proposed", {key: False})
+    assert off_rmse > base_rmse + 0.2
+    # the turn the approach showed, considered alone (extensions.map_turn_consider), keeps the
+    # NEES honest but not the error; without either the NEES blows up too
+    _, neither_nees = _truth_figures(
+        0, "proposed", {key: False, "extensions.map_turn_consider": False}
+    )
+    assert neither_nees > CHI2_2DOF_95
