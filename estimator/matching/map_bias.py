@@ -185,6 +185,58 @@ def unbiased(params: Params, *, lane: float, normal: F64, learned: MapBias) -> M
     )
 
 
+@dataclass(frozen=True)
+class _LateralRows:
+    """The approach's cross-track distances to a route, the rows of the bias fits."""
+
+    points: F64
+    """(K, 2) the track's points (thinned to the window spacing) that project inside the route"""
+    d: F64
+    """(K,) their cross-track distances"""
+    normal: F64
+    """(K, 2) the route's normals where they project"""
+    weights: F64
+    """(K,) 1 / variance of each distance"""
+    span: float
+    """distance along the thinned track, m"""
+
+
+def _lateral_rows(
+    xy: F64,
+    route: Route,
+    end_s: float,
+    track_var: F64 | None,
+    track_cov: F64,
+    params: Params,
+) -> _LateralRows | None:
+    """The approach ``xy`` (ending at arc length ``end_s``) against ``route``; None with fewer
+    than 5 points on it. The map's shape and the lane keeping err together over a window's
+    length, so the distances count as many independent ones as windows fit in the span;
+    ``track_var`` adds each point's own variance beyond the track's common error."""
+    keep = _thin(xy, params.window.spacing_m)
+    pts = xy[keep]
+    step = np.hypot(*np.diff(pts, axis=0).T)
+    back = np.concatenate([np.cumsum(step[::-1])[::-1], [0.0]])
+    proj = route.project(pts, end_s - back, params.window.route_search_m)
+    inside = (proj.s > 1e-6) & (proj.s < route.length - 1e-6)
+    if np.count_nonzero(inside) < 5:
+        return None
+    span = float(back[0])
+    d = proj.lateral[inside]
+    n_eff = max(span / params.window.length_m, 1.0)
+    var = np.full(len(d), len(d) * params.pseudo.shape_noise_m**2 / n_eff)
+    if track_var is not None:
+        v = np.asarray(track_var, np.float64)[keep][inside]
+        var += np.maximum(v - 0.5 * float(np.trace(track_cov)), 0.0)
+    return _LateralRows(
+        points=pts[inside],
+        d=d,
+        normal=route.normal_at(proj.s[inside]),
+        weights=1.0 / var,
+        span=span,
+    )
+
+
 def _thin(xy: F64, spacing: float) -> NDArray[np.intp]:
     """Indices of the points of ``xy`` at least ``spacing`` apart along it, the last kept."""
     step = np.hypot(*np.diff(xy, axis=0).T)
@@ -268,28 +320,14 @@ def learn_map_bias(
     prior = prior_bias(params, lane=lane_offset, normal=normal_end)
     if len(xy) < 2:
         return prior
-    keep = _thin(xy, params.window.spacing_m)
-    pts = xy[keep]
-    step = np.hypot(*np.diff(pts, axis=0).T)
-    back = np.concatenate([np.cumsum(step[::-1])[::-1], [0.0]])
-    proj = route.project(pts, end_s - back, params.window.route_search_m)
-    inside = (proj.s > 1e-6) & (proj.s < route.length - 1e-6)
-    span = float(back[0])
-    if np.count_nonzero(inside) < 5 or span < params.window.length_m:
+    rows = _lateral_rows(xy, route, end_s, track_var, track_cov, params)
+    if rows is None or rows.span < params.window.length_m:
         return prior
     end = xy[-1]
-    d = proj.lateral[inside]
-    nrm = route.normal_at(proj.s[inside])
-    rel = pts[inside] - end
+    d, nrm, weights = rows.d, rows.normal, rows.weights
+    rel = rows.points - end
     turned = np.column_stack([-rel[:, 1], rel[:, 0]])  # J (x - x_e)
     A = np.column_stack([np.ones(len(d)), -nrm, -np.sum(nrm * turned, axis=1)])
-    # the map's shape and the lane keeping err together over a window's length
-    n_eff = max(span / params.window.length_m, 1.0)
-    var = np.full(len(d), len(d) * params.pseudo.shape_noise_m**2 / n_eff)
-    if track_var is not None:
-        v = np.asarray(track_var, np.float64)[keep][inside]
-        var += np.maximum(v - 0.5 * float(np.trace(track_cov)), 0.0)
-    weights = 1.0 / var
     n_lateral = len(d)
     P0 = np.zeros((4, 4))
     P0[0, 0] = op.map_bias_lane_sigma_m**2
@@ -447,24 +485,11 @@ def refined_bias(
     moved = Route(carried.moved_back(route.xy, carried.offset))
     end = xy[-1]
     end_s = float(moved.project(end[None, :], s_guess, params.window.route_search_m).s[0])
-    keep = _thin(xy, params.window.spacing_m)
-    pts = xy[keep]
-    step = np.hypot(*np.diff(pts, axis=0).T)
-    back = np.concatenate([np.cumsum(step[::-1])[::-1], [0.0]])
-    proj = moved.project(pts, end_s - back, params.window.route_search_m)
-    inside = (proj.s > 1e-6) & (proj.s < moved.length - 1e-6)
-    if np.count_nonzero(inside) < 5:
+    rows = _lateral_rows(xy, moved, end_s, track_var, track_cov, params)
+    if rows is None:
         return carried
-    span = float(back[0])
-    d = proj.lateral[inside]
-    nrm = moved.normal_at(proj.s[inside])
+    d, nrm, weights = rows.d, rows.normal, rows.weights
     A = np.column_stack([np.ones(len(d)), -nrm])
-    n_eff = max(span / params.window.length_m, 1.0)
-    var = np.full(len(d), len(d) * params.pseudo.shape_noise_m**2 / n_eff)
-    if track_var is not None:
-        v = np.asarray(track_var, np.float64)[keep][inside]
-        var += np.maximum(v - 0.5 * float(np.trace(track_cov)), 0.0)
-    weights = 1.0 / var
     n_lateral = len(d)
     P0 = np.zeros((3, 3))
     P0[0, 0] = op.map_bias_lane_sigma_m**2
