@@ -159,6 +159,8 @@ class MapBiasUse:
     """the route is drawn turned by this about where the bias was learned (0 unless
     significant)"""
     rotation_sigma_rad: float = 0.0
+    applied: bool = False
+    """the bias was applied (the route moved back by it); else the route was taken as right"""
 
 
 @dataclass(frozen=True)

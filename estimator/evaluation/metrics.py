@@ -367,11 +367,6 @@ def map_bias_notes(run: Run) -> list[str]:
         bias, n = rec.map_bias, rec.fit.normal
         t = np.array([n[1], -n[0]])
         learned = bias.learned if np.all(np.isfinite(bias.learned)) else bias.offset
-        applied = (
-            bias.chi2 >= run.params.offset.map_bias_min_sigmas**2
-            if np.isfinite(bias.chi2)
-            else bool(np.any(bias.offset != 0.0))
-        )
         along, across = float(t @ learned), float(n @ learned)
         measured = (
             f"{abs(along):.1f} m {'ahead' if along >= 0 else 'behind'} and {abs(across):.1f} m "
@@ -382,7 +377,7 @@ def map_bias_notes(run: Run) -> list[str]:
         verdict = (
             f"applied (sigma {math.sqrt(float(t @ bias.cov @ t)):.1f} m along, "
             f"{math.sqrt(float(n @ bias.cov @ n)):.1f} m across)"
-            if applied
+            if bias.applied
             else "not significant: the route taken as right"
         )
         notes.append(

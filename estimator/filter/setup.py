@@ -5,6 +5,7 @@ GNSS-degraded intervals where the route matcher steps in."""
 
 from __future__ import annotations
 
+import contextlib
 import math
 from dataclasses import dataclass
 
@@ -143,9 +144,21 @@ def prepare_inputs(log: Log, p: Params, frame: LocalFrame, outages: Outages) -> 
     )
     warnings.extend(notes)
     realignments = _realignments(
-        src, imu_t, gyro, accel, still, wheel_t, wheel_v, gnss_t, gnss_pos, gnss_var, p, cfg
+        src,
+        imu_t,
+        gyro,
+        accel,
+        still,
+        wheel_t,
+        wheel_v,
+        gnss_t,
+        gnss_pos,
+        gnss_var,
+        p,
+        cfg,
+        t_start=log.t_start,
+        warnings=warnings,
     )
-    warnings.extend(_realignment_notes(imu_t, realignments, log.t_start))
     # the aligning fix measures position + wander: their errors start anti-correlated
     for i in range(3):
         a, b = E_POS + i, E_GW + i
@@ -192,61 +205,55 @@ def _realignments(
     gnss_var: F64,
     p: Params,
     cfg: F64,
+    *,
+    t_start: float,
+    warnings: list[str],
 ) -> tuple[Realignment, ...]:
     """An alignment after every IMU gap from the first :data:`REALIGN_WITHIN_S` of the data
     after it, the same way the run's start is aligned (several fixes, motion consistency).
     Across a gap the wheels carry the position, but where the road turned in it nothing
     measured the heading: fixes then pull the position back while a heading tens of degrees
     off drags it away again, for minutes. None where the track after the gap cannot align (a
-    gap in a tunnel: the bridged state goes on) or where the heading is configured."""
-    if p.sensors.initial_heading_deg is not None:
-        return ()
-    found = []
+    gap in a tunnel: the bridged state goes on) or where the heading is configured. Each gap
+    gets a line in ``warnings``: re-aligned, or carried with its heading unknown."""
+    found: list[Realignment] = []
     for g in np.flatnonzero(np.diff(imu_t) > IMU_GAP_S):
         k1 = int(g) + 1
-        b = float(imu_t[k1])
-        fixes = (gnss_t >= b) & (gnss_t <= b + REALIGN_WITHIN_S)
-        if fixes.sum() < 2 or gnss_t[fixes][0] > b + REALIGN_FIX_AT_END_S:
-            continue
-        try:
-            x, P, k, _t_fix, _notes = align(
-                src,
-                imu_t[k1:],
-                gyro[k1:],
-                accel[k1:],
-                still[k1:],
-                wheel_t,
-                wheel_v,
-                gnss_t[fixes],
-                gnss_pos[fixes],
-                gnss_var[fixes],
-                p,
-                cfg,
-            )
-        except LogError:
-            continue
-        found.append(Realignment(t=float(imu_t[k1 + k]), x=x, P=P))
-    return tuple(found)
-
-
-def _realignment_notes(
-    imu_t: F64, realignments: tuple[Realignment, ...], t_start: float
-) -> list[str]:
-    """One line per IMU gap: re-aligned, or carried with its heading unknown."""
-    notes = []
-    for g in np.flatnonzero(np.diff(imu_t) > IMU_GAP_S):
-        a, b = float(imu_t[g]), float(imu_t[g + 1])
-        after = [r.t for r in realignments if b <= r.t <= b + REALIGN_WITHIN_S]
+        a, b = float(imu_t[g]), float(imu_t[k1])
         span = f"IMU gap {a - t_start:.1f}-{b - t_start:.1f} s"
-        if after:
-            notes.append(f"{span}: re-aligned from the GNSS track at {after[0] - t_start:.1f} s")
-        else:
-            notes.append(
+        fixes = (gnss_t >= b) & (gnss_t <= b + REALIGN_WITHIN_S)
+        aligned = None
+        if (
+            p.sensors.initial_heading_deg is None
+            and fixes.sum() >= 2
+            and gnss_t[fixes][0] <= b + REALIGN_FIX_AT_END_S
+        ):
+            with contextlib.suppress(LogError):
+                aligned = align(
+                    src,
+                    imu_t[k1:],
+                    gyro[k1:],
+                    accel[k1:],
+                    still[k1:],
+                    wheel_t,
+                    wheel_v,
+                    gnss_t[fixes],
+                    gnss_pos[fixes],
+                    gnss_var[fixes],
+                    p,
+                    cfg,
+                )
+        if aligned is None:
+            warnings.append(
                 f"{span}: not re-aligned (no GNSS as the IMU came back, or no straight GNSS "
                 f"track within {REALIGN_WITHIN_S:g} s after it); the heading carried across it "
                 "is left to the fixes after it"
             )
-    return notes
+            continue
+        x, P, k, _t_fix, _notes = aligned
+        found.append(Realignment(t=float(imu_t[k1 + k]), x=x, P=P))
+        warnings.append(f"{span}: re-aligned from the GNSS track at {found[-1].t - t_start:.1f} s")
+    return tuple(found)
 
 
 def _outside_imu_gaps(

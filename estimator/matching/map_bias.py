@@ -247,6 +247,40 @@ def _thin(xy: F64, spacing: float) -> NDArray[np.intp]:
     return keep
 
 
+def _with_shape_row(
+    A: F64,
+    d: F64,
+    nrm: F64,
+    weights: F64,
+    xy: F64,
+    track_cov: F64,
+    moved: Route,
+    end_s: float,
+    first: F64,
+    params: Params,
+) -> tuple[F64, F64, F64, F64]:
+    """The fit's rows (``A``, ``d``, ``nrm``, ``weights``; unknowns lane, shift E, N, ...)
+    with, where the approach's shape fixes it, its along-track registration to ``moved`` (the
+    route moved back by the first solve ``first``, so that a wrong lane on a bend does not skew
+    the arc length) as one more row: t . b = t . b1 + y."""
+    end = xy[-1]
+    s_moved = float(moved.project(end[None, :], end_s, params.window.route_search_m).s[0])
+    along = _along_by_shape(
+        xy, track_cov, moved, s_guess=s_moved, lane=float(first[0]), params=params
+    )
+    if along is None:
+        return A, d, nrm, weights
+    y, tangent, along_var = along
+    row = np.zeros(A.shape[1])
+    row[1:3] = tangent
+    return (
+        np.vstack([A, row]),
+        np.append(d, y + float(tangent @ first[1:3])),
+        np.vstack([nrm, -tangent]),
+        np.append(weights, 1.0 / along_var),
+    )
+
+
 def _along_by_shape(
     xy: F64, track_cov: F64, route: Route, *, s_guess: float, lane: float, params: Params
 ) -> tuple[float, F64, float] | None:
@@ -339,14 +373,9 @@ def learn_map_bias(
     mean = np.array([op.map_bias_lane_prior_m, 0.0, 0.0, 0.0])
     u1 = _solve(A, d, weights, P0, nrm, mean)[0]
     moved = Route(xy_moved_back(route.xy, u1[1:3], float(u1[3]), end))
-    s_moved = float(moved.project(end[None, :], end_s, params.window.route_search_m).s[0])
-    along = _along_by_shape(xy, track_cov, moved, s_guess=s_moved, lane=float(u1[0]), params=params)
-    if along is not None:
-        y, tangent, along_var = along
-        A = np.vstack([A, np.concatenate([[0.0], tangent, [0.0]])])
-        d = np.append(d, y + float(tangent @ u1[1:3]))
-        nrm = np.vstack([nrm, -tangent])
-        weights = np.append(weights, 1.0 / along_var)
+    A, d, nrm, weights = _with_shape_row(
+        A, d, nrm, weights, xy, track_cov, moved, end_s, u1, params
+    )
     u, C, G = _solve(A, d, weights, P0, nrm, mean)
     residual = float(np.sqrt(np.mean((d[:n_lateral] - A[:n_lateral] @ u) ** 2)))
     if not np.isfinite(residual) or residual > op.map_bias_max_residual_m:
@@ -497,14 +526,9 @@ def refined_bias(
     mean = np.array([op.map_bias_lane_prior_m, 0.0, 0.0])
     u1 = _solve(A, d, weights, P0, nrm, mean)[0]
     again = Route(xy_moved_back(moved.xy, u1[1:], 0.0, end))
-    s_again = float(again.project(end[None, :], end_s, params.window.route_search_m).s[0])
-    along = _along_by_shape(xy, track_cov, again, s_guess=s_again, lane=float(u1[0]), params=params)
-    if along is not None:
-        y, tangent, along_var = along
-        A = np.vstack([A, np.concatenate([[0.0], tangent])])
-        d = np.append(d, y + float(tangent @ u1[1:]))
-        nrm = np.vstack([nrm, -tangent])
-        weights = np.append(weights, 1.0 / along_var)
+    A, d, nrm, weights = _with_shape_row(
+        A, d, nrm, weights, xy, track_cov, again, end_s, u1, params
+    )
     u, C, G = _solve(A, d, weights, P0, nrm, mean)
     residual = float(np.sqrt(np.mean((d[:n_lateral] - A[:n_lateral] @ u) ** 2)))
     if not np.isfinite(residual) or residual > op.map_bias_max_residual_m:

@@ -305,7 +305,7 @@ class Driver:
                 elif self.p.extensions.lane_offset_state and self.track.s is not None:
                     t = self.route.tangent_at(self.track.s)[0]
                     clone_lane_offset(f.P, f.aux, self.inp.cfg, np.array([-t[1], t[0]]))
-                turn = bias is not None and self.p.extensions.map_turn_consider
+                turn = self.p.extensions.map_turn_consider
                 clone_map_turn(f.P, f.aux, f.x, bias.turn_var if bias is not None and turn else 0.0)
             while True:
                 t_try = a + tr.min_outage_s + k * tr.interval_s
@@ -397,7 +397,8 @@ class Driver:
             previous = (tr.bias, self._route_estimate(aux)[0], tr.pivot_dist)
         tr.bias, tr.biased_route = None, None
         if self.p.extensions.map_bias:
-            tr.bias = self._learn_bias(rows, last, s_last)
+            track = self._bias_track(rows, last)
+            tr.bias = self._learn_bias(track, s_last)
             if previous is not None and not np.isfinite(tr.bias.chi2):
                 # too little driving since the previous outage to learn: its bias still holds
                 bias, offset, pivot_dist = previous
@@ -413,16 +414,15 @@ class Driver:
                         metres=float(aux[A_DIST]) - pivot_dist,
                         params=self.p,
                     )
-                    track = self._bias_track(rows, last)
                     if self.p.offset.map_bias_refine and track is not None:
                         tr.bias = refined_bias(
                             track[:, O_POS : O_POS + 2],
-                            np.diag(track[-1, O_SIG_POS : O_SIG_POS + 2] ** 2),
+                            _track_cov(track),
                             self.route,
                             carried=tr.bias,
                             s_guess=s_last,
                             params=self.p,
-                            track_var=0.5 * np.sum(track[:, O_SIG_POS : O_SIG_POS + 2] ** 2, 1),
+                            track_var=_track_var(track),
                         )
                 else:
                     tr.bias = unbiased(self.p, lane=tr.lane, normal=normal, learned=bias)
@@ -445,23 +445,22 @@ class Driver:
             s_guess=s_last,
         )
 
-    def _learn_bias(self, rows: F64, last: NDArray[np.intp], s_last: float) -> MapBias:
-        """The map bias from the estimate over the last ``offset.map_bias_track_m`` of travel
-        up to the last epoch a fix was used in (:func:`learn_map_bias`)."""
+    def _learn_bias(self, track: F64 | None, s_last: float) -> MapBias:
+        """The map bias from the estimate over ``track`` (:meth:`_bias_track`;
+        :func:`learn_map_bias`), the prior without one."""
         lane = self.track.lane
         prior = prior_bias(self.p, lane=lane, normal=self.route.normal_at(np.array([s_last]))[0])
-        track = self._bias_track(rows, last)
         if track is None:
             return prior
         self.track.pivot_dist = float(track[-1, O_DIST])
         return learn_map_bias(
             track[:, O_POS : O_POS + 2],
-            np.diag(track[-1, O_SIG_POS : O_SIG_POS + 2] ** 2),
+            _track_cov(track),
             self.route,
             s_guess=s_last,
             lane_offset=self.track.lane,
             params=self.p,
-            track_var=0.5 * np.sum(track[:, O_SIG_POS : O_SIG_POS + 2] ** 2, axis=1),
+            track_var=_track_var(track),
         )
 
     def _bias_track(self, rows: F64, last: NDArray[np.intp]) -> F64 | None:
@@ -568,6 +567,7 @@ class Driver:
                 chi2=bias.chi2,
                 rotation_rad=bias.rotation,
                 rotation_sigma_rad=bias.rotation_sigma,
+                applied=bias.significant,
             )
             return dataclasses.replace(rec, map_bias=used)
 
@@ -710,6 +710,18 @@ class Driver:
 
     def epochs(self) -> Epochs:
         return epochs_of(self.filt.out, self.filt.n_out, self.inp.degraded)
+
+
+def _track_cov(track: F64) -> F64:
+    """The E/N covariance of the error a bias track's points share: the filter's at its end."""
+    cov: F64 = np.diag(track[-1, O_SIG_POS : O_SIG_POS + 2] ** 2)
+    return cov
+
+
+def _track_var(track: F64) -> F64:
+    """Each point's own horizontal variance per axis (the mean of E and N)."""
+    var: F64 = 0.5 * np.sum(track[:, O_SIG_POS : O_SIG_POS + 2] ** 2, axis=1)
+    return var
 
 
 def unapplied_considered(bias: MapBias) -> MapBias:
