@@ -40,23 +40,6 @@ PSEUDO = (220, 30, 140)
 ACCEPTED = (30, 170, 60)
 REJECTED = (220, 40, 40)
 
-COLOUR_NAMES: dict[RGB, str] = {
-    ROUTE: "grey",
-    SEGMENT: "yellow",
-    MAP_SEGMENT: "brown",
-    BASELINE: "orange",
-    PROPOSED: "blue",
-    TRUTH: "dark green",
-    GNSS: "green",
-    NO_GNSS: "pink",
-    DR_WINDOW: "purple",
-    ALIGNED: "cyan",
-    PAIRS: "light grey",
-    PSEUDO: "magenta",
-    ACCEPTED: "green",
-    REJECTED: "red",
-}
-"""the colours in words, where a legend cannot show them (a replay's scene label)"""
 
 MATCH_MAX_AGE_S = 5.0
 """The current attempt stays drawn this long after its time (then the frame has no match)."""

@@ -119,8 +119,15 @@ def replay_strip(
         ax.set_ylim(bottom=0.0)
         ax.tick_params(labelsize="x-small")
         ax.grid(alpha=0.3)
-        for t in refused_t:
-            ax.axvline(float(t), color=REJECTED_COLOR, lw=0.6, alpha=0.6)
+        ax.vlines(
+            refused_t,
+            0.0,
+            1.0,
+            transform=ax.get_xaxis_transform(),
+            color=REJECTED_COLOR,
+            lw=0.6,
+            alpha=0.6,
+        )
     axes[0].legend(loc="upper left", fontsize="x-small", ncols=3)
     axes[-1].set_xlabel("log time [s]", fontsize="small")
     t_lo, t_hi = (float(plot.t[0]), float(plot.t[-1])) if len(plot.t) > 1 else (0.0, 1.0)

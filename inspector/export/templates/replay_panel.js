@@ -10,6 +10,8 @@
   const prevRefused = $("rf-prev-refused"), nextRefused = $("rf-next-refused");
   const attempts = data.attempts;
   const refused = attempts.filter((a) => !a.accepted);
+  const refusedBefore = [0]; // refusedBefore[n]: refusals among the first n attempts
+  for (const a of attempts) refusedBefore.push(refusedBefore.at(-1) + (a.accepted ? 0 : 1));
   const EPS = 0.01;
   const MAX_STEP_MS = 250; // after a stall (a shader compiling), step on instead of jumping
   let t = 0, playing = false, lastFrame = null, shownAttempt = undefined, viserInput = null;
@@ -33,9 +35,19 @@
     return true;
   }
 
+  function attemptsBy(time) {
+    // how many attempts were made by ``time`` (they are in time order): a binary search
+    let lo = 0, hi = attempts.length;
+    while (lo < hi) {
+      const mid = (lo + hi) >> 1;
+      if (attempts[mid].t <= time + EPS) lo = mid + 1;
+      else hi = mid;
+    }
+    return lo;
+  }
+
   function attemptAt(time) {
-    let k = -1;
-    for (let i = 0; i < attempts.length && attempts[i].t <= time + EPS; i++) k = i;
+    const k = attemptsBy(time) - 1;
     if (k < 0 || time - attempts[k].t > data.max_age_s) return -1;
     return k;
   }
@@ -79,11 +91,10 @@
   function show(time, { seek = true } = {}) {
     t = Math.min(Math.max(time, 0), data.duration);
     slider.value = String(t);
-    const done = attempts.filter((a) => a.t <= t + EPS);
-    const nRefused = done.filter((a) => !a.accepted).length;
+    const done = attemptsBy(t);
     clock.textContent =
       `log time ${t.toFixed(1)} s / ${data.duration.toFixed(1)} s · ` +
-      `${inOutage(t) ? "GNSS outage" : "GNSS"} · attempts ${done.length} (${nRefused} refused)`;
+      `${inOutage(t) ? "GNSS outage" : "GNSS"} · attempts ${done} (${refusedBefore[done]} refused)`;
     placeCursor(t);
     showAttempt(attemptAt(t));
     prevRefused.disabled = !refused.some((a) => a.t < t - EPS);
