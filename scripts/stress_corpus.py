@@ -40,7 +40,7 @@ def run_drive(index: int) -> dict[str, Any]:
     """One corpus drive's row (runs in a Dask worker)."""
     import numpy as np
 
-    from estimator.evaluation.metrics import interval_mask, method_metrics
+    from estimator.evaluation.metrics import method_metrics, outage_errors
     from estimator.params import Params, with_values
     from estimator.pipeline import run_methods
     from estimator.sim.stress import build, drive_spec
@@ -64,16 +64,10 @@ def run_drive(index: int) -> dict[str, Any]:
         inputs = drive.inputs
         log, route, frame = inputs.log, inputs.route, inputs.frame
         assert log.truth is not None and route is not None
-        truth = frame.to_enu(log.truth.lat, log.truth.lon, log.truth.alt)
         for label, (method, values) in RUNS.items():
             run = run_methods(inputs, with_values(Params(), values), methods=(method,))[method]
             metrics = method_metrics(run, route, log)
-            e = run.epochs
-            sel = interval_mask(e.t, run.degraded_intervals) & (e.t <= log.truth.t[-1])
-            err = e.position[sel, :2] - np.column_stack(
-                [np.interp(e.t[sel], log.truth.t, truth[:, i]) for i in range(2)]
-            )
-            nees = np.sum((err / e.position_sigma[sel, :2]) ** 2, axis=1)
+            _, nees = outage_errors(run, log, frame)
             t = metrics.truth
             row[f"{label}_truth_rmse_m"] = (
                 round(t.rmse_h_err_m, 3) if t and t.rmse_h_err_m is not None else None

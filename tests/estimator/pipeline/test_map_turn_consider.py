@@ -6,7 +6,7 @@ from __future__ import annotations
 
 import numpy as np
 
-from estimator.evaluation.metrics import interval_mask
+from estimator.evaluation.metrics import outage_errors
 from estimator.filter.layout import A_MAP_AT, E_MAP, E_ROT, NA, NE, X_POS
 from estimator.filter.updates import clone_map_turn, turn_map_bias
 from estimator.params import Params, with_values
@@ -43,13 +43,7 @@ def _truth_figures(index: int, values: dict[str, object]) -> tuple[float, float]
     log, frame = inputs.log, inputs.frame
     assert log.truth is not None
     run = run_methods(inputs, with_values(Params(), values), methods=("proposed",))["proposed"]
-    e = run.epochs
-    sel = interval_mask(e.t, run.degraded_intervals) & (e.t <= log.truth.t[-1])
-    truth = frame.to_enu(log.truth.lat, log.truth.lon, log.truth.alt)
-    err = e.position[sel, :2] - np.column_stack(
-        [np.interp(e.t[sel], log.truth.t, truth[:, i]) for i in range(2)]
-    )
-    nees = np.sum((err / e.position_sigma[sel, :2]) ** 2, axis=1)
+    err, nees = outage_errors(run, log, frame)
     return float(np.sqrt(np.mean(np.sum(err**2, axis=1)))), float(nees.mean())
 
 

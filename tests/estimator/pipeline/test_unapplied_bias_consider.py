@@ -7,7 +7,7 @@ from __future__ import annotations
 import numpy as np
 import pytest
 
-from estimator.evaluation.metrics import interval_mask
+from estimator.evaluation.metrics import outage_errors
 from estimator.matching.map_bias import MapBias
 from estimator.params import Params, with_values
 from estimator.pipeline import run_methods
@@ -59,13 +59,7 @@ def _truth_figures(index: int, method: str, values: dict[str, object]) -> tuple[
     log, frame = inputs.log, inputs.frame
     assert log.truth is not None
     run = run_methods(inputs, with_values(Params(), values), methods=(method,))[method]  # type: ignore[arg-type]
-    e = run.epochs
-    sel = interval_mask(e.t, run.degraded_intervals) & (e.t <= log.truth.t[-1])
-    truth = frame.to_enu(log.truth.lat, log.truth.lon, log.truth.alt)
-    err = e.position[sel, :2] - np.column_stack(
-        [np.interp(e.t[sel], log.truth.t, truth[:, i]) for i in range(2)]
-    )
-    nees = np.sum((err / e.position_sigma[sel, :2]) ** 2, axis=1)
+    err, nees = outage_errors(run, log, frame)
     return float(np.sqrt(np.mean(np.sum(err**2, axis=1)))), float(nees.mean())
 
 
