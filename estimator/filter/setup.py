@@ -222,6 +222,9 @@ def _realignments(
         a, b = float(imu_t[g]), float(imu_t[k1])
         span = f"IMU gap {a - t_start:.1f}-{b - t_start:.1f} s"
         fixes = (gnss_t >= b) & (gnss_t <= b + REALIGN_WITHIN_S)
+        # the samples the alignment can reach (its fixes' span and the second before): a log
+        # broken into thousands of gaps costs thousands of short alignments, not whole logs
+        k2 = int(np.searchsorted(imu_t, b + REALIGN_WITHIN_S + 1.0, side="right"))
         aligned = None
         if (
             p.sensors.initial_heading_deg is None
@@ -231,10 +234,10 @@ def _realignments(
             with contextlib.suppress(LogError):
                 aligned = align(
                     src,
-                    imu_t[k1:],
-                    gyro[k1:],
-                    accel[k1:],
-                    still[k1:],
+                    imu_t[k1:k2],
+                    gyro[k1:k2],
+                    accel[k1:k2],
+                    still[k1:k2],
                     wheel_t,
                     wheel_v,
                     gnss_t[fixes],
