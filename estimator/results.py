@@ -137,6 +137,12 @@ class LongWindow:
     short_window_length_m: float
 
 
+MapBiasRefusal = Literal["too large", "lane too far"]
+"""Why a map bias the approach measured was taken for another road and not applied: ``"too
+large"`` for a map's error all along the road ahead (``offset.map_bias_max_prior_sigmas`` of
+its prior), or the lane it implies ``"lane too far"`` from the route (``offset.max_offset_m``)."""
+
+
 @dataclass(frozen=True)
 class MapBiasUse:
     """The map bias an attempt was matched with (``extensions.map_bias``): its pseudo-position
@@ -161,6 +167,9 @@ class MapBiasUse:
     rotation_sigma_rad: float = 0.0
     applied: bool = False
     """the bias was applied (the route moved back by it); else the route was taken as right"""
+    refused: MapBiasRefusal | None = None
+    """why it was not applied when that was not its significance: taken for another road, the
+    matcher's gates judging the route as it is (None when applied or not significant)"""
 
 
 @dataclass(frozen=True)

@@ -21,7 +21,7 @@ from estimator.log import Log
 from estimator.matching import learn_lane_offset, track_on_route
 from estimator.nav.frames import LocalFrame
 from estimator.params import Params
-from estimator.results import Run
+from estimator.results import MapBiasRefusal, Run
 from estimator.route import Route
 
 F64 = NDArray[np.float64]
@@ -370,11 +370,18 @@ def match_summary(run: Run) -> dict[str, object]:
     return {"attempted": len(run.matches), "accepted": accepted, "rejected": rejected}
 
 
+_REFUSALS: dict[MapBiasRefusal, str] = {
+    "too large": "too large for a map's error",
+    "lane too far": "the lane it implies too far from the route",
+}
+
+
 def map_bias_notes(run: Run) -> list[str]:
     """One line per GNSS-degraded interval that was matched with a map bias
     (``extensions.map_bias``): what the approach measured, along and across the road, and
-    whether it was applied or the route taken as right. A map the run corrected must say so:
-    the route deviation alone would call the corrected run "off the route"."""
+    whether it was applied, taken for another road, or found not significant (the route taken
+    as right). A map the run corrected must say so: the route deviation alone would call the
+    corrected run "off the route"; and a bias refused as another road is not a right map."""
     notes = []
     for a, b in run.degraded_intervals:
         rec = next(
@@ -392,12 +399,15 @@ def map_bias_notes(run: Run) -> list[str]:
         )
         if bias.rotation_rad:
             measured += f" (turned {math.degrees(bias.rotation_rad):+.2f} deg about)"
-        verdict = (
-            f"applied (sigma {math.sqrt(float(t @ bias.cov @ t)):.1f} m along, "
-            f"{math.sqrt(float(n @ bias.cov @ n)):.1f} m across)"
-            if bias.applied
-            else "not significant: the route taken as right"
-        )
+        if bias.applied:
+            verdict = (
+                f"applied (sigma {math.sqrt(float(t @ bias.cov @ t)):.1f} m along, "
+                f"{math.sqrt(float(n @ bias.cov @ n)):.1f} m across)"
+            )
+        elif bias.refused is not None:
+            verdict = f"not applied: {_REFUSALS[bias.refused]} (another road?)"
+        else:
+            verdict = "not significant: the route taken as right"
         notes.append(
             f"map bias for the outage at {a - run.t0:.1f} s: the route is drawn {measured} "
             f"the road driven; {verdict}"

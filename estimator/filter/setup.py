@@ -124,8 +124,9 @@ def prepare_inputs(log: Log, p: Params, frame: LocalFrame, outages: Outages) -> 
     imu_t, gyro, accel = _imu_arrays(log, s, warnings)
     wheel_t, wheel_v = _wheel_arrays(log, s, warnings)
     gnss_t, gnss_pos, gnss_var = _gnss_arrays(log, p, frame, outages)
-    gnss_t, gnss_pos, gnss_var = _outside_imu_gaps(
-        imu_t, gnss_t, gnss_pos, gnss_var, log.t_start, log.wheel is not None, warnings
+    gaps = np.flatnonzero(np.diff(imu_t) > IMU_GAP_S)
+    gnss_t, gnss_pos, gnss_var, left_out = _outside_imu_gaps(
+        imu_t, gaps, gnss_t, gnss_pos, gnss_var
     )
     n = p.noise
     h_floor = n.gnss_sigma_floor_m**2
@@ -143,9 +144,10 @@ def prepare_inputs(log: Log, p: Params, frame: LocalFrame, outages: Outages) -> 
         src, imu_t, gyro, accel, still, wheel_t, wheel_v, gnss_t, gnss_pos, gnss_var, p, cfg
     )
     warnings.extend(notes)
-    realignments = _realignments(
+    after_gaps = _realignments(
         src,
         imu_t,
+        gaps,
         gyro,
         accel,
         still,
@@ -156,9 +158,17 @@ def prepare_inputs(log: Log, p: Params, frame: LocalFrame, outages: Outages) -> 
         gnss_var,
         p,
         cfg,
-        t_start=log.t_start,
-        warnings=warnings,
     )
+    warnings.extend(
+        imu_gap_warnings(
+            imu_t[gaps] - log.t_start,
+            imu_t[gaps + 1] - log.t_start,
+            left_out,
+            tuple(None if r is None else r.t - log.t_start for r in after_gaps),
+            have_wheel=log.wheel is not None,
+        )
+    )
+    realignments = tuple(r for r in after_gaps if r is not None)
     # the aligning fix measures position + wander: their errors start anti-correlated
     for i in range(3):
         a, b = E_POS + i, E_GW + i
@@ -195,6 +205,7 @@ def prepare_inputs(log: Log, p: Params, frame: LocalFrame, outages: Outages) -> 
 def _realignments(
     src: str,
     imu_t: F64,
+    gaps: NDArray[np.intp],
     gyro: F64,
     accel: F64,
     still: NDArray[np.bool_],
@@ -205,31 +216,29 @@ def _realignments(
     gnss_var: F64,
     p: Params,
     cfg: F64,
-    *,
-    t_start: float,
-    warnings: list[str],
-) -> tuple[Realignment, ...]:
-    """An alignment after every IMU gap from the first :data:`REALIGN_WITHIN_S` of the data
-    after it, the same way the run's start is aligned (several fixes, motion consistency).
-    Across a gap the wheels carry the position, but where the road turned in it nothing
-    measured the heading: fixes then pull the position back while a heading tens of degrees
-    off drags it away again, for minutes. None where the track after the gap cannot align (a
-    gap in a tunnel: the bridged state goes on) or where the heading is configured. Each gap
-    gets a line in ``warnings``: re-aligned, or carried with its heading unknown."""
-    found: list[Realignment] = []
-    for g in np.flatnonzero(np.diff(imu_t) > IMU_GAP_S):
+) -> tuple[Realignment | None, ...]:
+    """An alignment after every IMU gap (``gaps``: the index of the last IMU sample before
+    each) from the first :data:`REALIGN_WITHIN_S` of the data after it, the same way the run's
+    start is aligned (several fixes, motion consistency). Across a gap the wheels carry the
+    position, but where the road turned in it nothing measured the heading: fixes then pull
+    the position back while a heading tens of degrees off drags it away again, for minutes.
+    None where the track after the gap cannot align (a gap in a tunnel: the bridged state goes
+    on) or where the heading is configured."""
+    found: list[Realignment | None] = []
+    for g in gaps:
         k1 = int(g) + 1
-        a, b = float(imu_t[g]), float(imu_t[k1])
-        span = f"IMU gap {a - t_start:.1f}-{b - t_start:.1f} s"
-        fixes = (gnss_t >= b) & (gnss_t <= b + REALIGN_WITHIN_S)
-        # the samples the alignment can reach (its fixes' span and the second before): a log
-        # broken into thousands of gaps costs thousands of short alignments, not whole logs
+        b = float(imu_t[k1])
+        # the fixes and samples the alignment can reach (its fixes' span and the second
+        # before): a log broken into thousands of gaps costs thousands of short alignments,
+        # not whole logs
+        lo = int(np.searchsorted(gnss_t, b, side="left"))
+        hi = int(np.searchsorted(gnss_t, b + REALIGN_WITHIN_S, side="right"))
         k2 = int(np.searchsorted(imu_t, b + REALIGN_WITHIN_S + 1.0, side="right"))
         aligned = None
         if (
             p.sensors.initial_heading_deg is None
-            and fixes.sum() >= 2
-            and gnss_t[fixes][0] <= b + REALIGN_FIX_AT_END_S
+            and hi - lo >= 2
+            and gnss_t[lo] <= b + REALIGN_FIX_AT_END_S
         ):
             with contextlib.suppress(LogError):
                 aligned = align(
@@ -240,54 +249,87 @@ def _realignments(
                     still[k1:k2],
                     wheel_t,
                     wheel_v,
-                    gnss_t[fixes],
-                    gnss_pos[fixes],
-                    gnss_var[fixes],
+                    gnss_t[lo:hi],
+                    gnss_pos[lo:hi],
+                    gnss_var[lo:hi],
                     p,
                     cfg,
                 )
         if aligned is None:
-            warnings.append(
-                f"{span}: not re-aligned (no GNSS as the IMU came back, or no straight GNSS "
-                f"track within {REALIGN_WITHIN_S:g} s after it); the heading carried across it "
-                "is left to the fixes after it"
-            )
+            found.append(None)
             continue
         x, P, k, _t_fix, _notes = aligned
         found.append(Realignment(t=float(imu_t[k1 + k]), x=x, P=P))
-        warnings.append(f"{span}: re-aligned from the GNSS track at {found[-1].t - t_start:.1f} s")
     return tuple(found)
 
 
-def _outside_imu_gaps(
-    imu_t: F64,
-    gnss_t: F64,
-    gnss_pos: F64,
-    gnss_var: F64,
-    t_start: float,
+IMU_GAPS_NAMED = 5
+"""A log with more IMU gaps than this names the first ``IMU_GAPS_NAMED - 1`` and sums the
+rest up in one line: a log cut into thousands of gaps gets a few warning lines, not
+thousands."""
+
+
+def imu_gap_warnings(
+    start: F64,
+    end: F64,
+    left_out: NDArray[np.intp],
+    realigned: tuple[float | None, ...],
+    *,
     have_wheel: bool,
-    warnings: list[str],
-) -> tuple[F64, F64, F64]:
-    """The fixes outside the IMU's logging gaps (longer than :data:`IMU_GAP_S`). Inside one
-    there is no state to test a fix against: taken at the gap's end, minutes-old fixes moved
-    by the old velocity would each pull the state somewhere else. The filter carries the state
-    across the gap (along the wheels' distance where they cover it) and re-places it at the
-    first fix after it. Each gap is named."""
-    gaps = np.flatnonzero(np.diff(imu_t) > IMU_GAP_S)
-    if not len(gaps):
-        return gnss_t, gnss_pos, gnss_var
-    keep = np.ones(len(gnss_t), bool)
-    for g in gaps:
-        a, b = float(imu_t[g]), float(imu_t[g + 1])
-        inside = (gnss_t > a) & (gnss_t < b)
-        keep &= ~inside
-        bridge = "carried along the wheel speed" if have_wheel else "held (no wheel speed)"
-        warnings.append(
-            f"IMU gap {a - t_start:.1f}-{b - t_start:.1f} s: no estimate inside it, the position "
-            f"{bridge}; {int(inside.sum())} fixes inside it not used, the filter re-placed at "
-            "the first fix after it"
+) -> list[str]:
+    """One line per IMU gap (``start``-``end``, s after the log start): how the position was
+    carried across it, the fixes inside it left out, and whether the filter was aligned
+    afresh after it (at ``realigned``, s) or its heading carried across is left to the fixes
+    after it. Beyond :data:`IMU_GAPS_NAMED` gaps, the rest are summed up in one line (their
+    span, their total length, the fixes left out, how many were re-aligned)."""
+    bridge = "carried along the wheel speed" if have_wheel else "held (no wheel speed)"
+    n = len(start)
+    named = n if n <= IMU_GAPS_NAMED else IMU_GAPS_NAMED - 1
+    lines = []
+    for i in range(named):
+        at = realigned[i]
+        done = (
+            f"re-aligned from the GNSS track at {at:.1f} s"
+            if at is not None
+            else f"not re-aligned (no GNSS as the IMU came back, or no straight GNSS track "
+            f"within {REALIGN_WITHIN_S:g} s after it): the filter re-placed at the first fix "
+            "after it, the heading carried across it left to the fixes after it"
         )
-    return gnss_t[keep], gnss_pos[keep], gnss_var[keep]
+        lines.append(
+            f"IMU gap {start[i]:.1f}-{end[i]:.1f} s: no estimate inside it, the position "
+            f"{bridge}; {int(left_out[i])} fixes inside it not used; {done}"
+        )
+    if named < n:
+        rest = slice(named, n)
+        total = float(np.sum(end[rest] - start[rest]))
+        again = sum(at is not None for at in realigned[rest])
+        lines.append(
+            f"... and {n - named} more IMU gaps between {start[named]:.1f} and {end[-1]:.1f} s "
+            f"({total:.1f} s in all, the position {bridge}; {int(np.sum(left_out[rest]))} fixes "
+            f"inside them not used; {again} re-aligned from the GNSS track, "
+            f"{n - named - again} not)"
+        )
+    return lines
+
+
+def _outside_imu_gaps(
+    imu_t: F64, gaps: NDArray[np.intp], gnss_t: F64, gnss_pos: F64, gnss_var: F64
+) -> tuple[F64, F64, F64, NDArray[np.intp]]:
+    """The fixes outside the IMU's logging gaps (``gaps``: the index of the last IMU sample
+    before each, longer than :data:`IMU_GAP_S`), and how many each gap held. Inside one there
+    is no state to test a fix against: taken at the gap's end, minutes-old fixes moved by the
+    old velocity would each pull the state somewhere else. The filter carries the state across
+    the gap (along the wheels' distance where they cover it) and re-places it at the first fix
+    after it."""
+    lo = np.searchsorted(gnss_t, imu_t[gaps], side="right")
+    hi = np.searchsorted(gnss_t, imu_t[gaps + 1], side="left")
+    inside = np.maximum(hi - lo, 0)
+    if not inside.any():
+        return gnss_t, gnss_pos, gnss_var, inside
+    keep = np.ones(len(gnss_t), bool)
+    for a, b in zip(lo, hi, strict=True):
+        keep[a:b] = False
+    return gnss_t[keep], gnss_pos[keep], gnss_var[keep], inside
 
 
 def _imu_arrays(log: Log, s: SensorParams, warnings: list[str]) -> tuple[F64, F64, F64]:

@@ -56,6 +56,7 @@ from numpy.typing import NDArray
 
 from estimator.matching.match import match_geometry
 from estimator.params import Params
+from estimator.results import MapBiasRefusal
 from estimator.route import Route
 
 F64 = NDArray[np.float64]
@@ -95,6 +96,9 @@ class MapBias:
     """variance of the map's rotation error, rad^2: the applied rotation's, or the second
     moment of one fitted but not applied (its square less its own variance); the outage's
     pseudo-positions carry it as a considered state (``extensions.map_turn_consider``)"""
+    refused: MapBiasRefusal | None = None
+    """why ``measured`` was not applied whatever its significance: too large for a map's
+    error, or with a lane too far from the route (another road); None otherwise"""
 
     @property
     def significant(self) -> bool:
@@ -126,6 +130,7 @@ def _result(
     along_observed: bool = False,
     pivot: F64 | None = None,
     turn_var: float = 0.0,
+    refused: MapBiasRefusal | None = None,
 ) -> MapBias:
     """No bias applied: the lane offset ``lane`` learned near the portal (its error the
     position error across ``normal``), the map-bias error of covariance ``map_cov``."""
@@ -146,6 +151,7 @@ def _result(
         chi2=chi2,
         along_observed=along_observed,
         turn_var=turn_var,
+        refused=refused,
     )
 
 
@@ -182,6 +188,7 @@ def unbiased(params: Params, *, lane: float, normal: F64, learned: MapBias) -> M
         chi2=learned.chi2,
         along_observed=learned.along_observed,
         pivot=learned.pivot,
+        refused=learned.refused,
     )
 
 
@@ -413,11 +420,14 @@ def learn_map_bias(
     chi2 = float(b @ np.linalg.solve(Cb, b))
     t_end = np.array([normal_end[1], -normal_end[0]])
     along_observed = math.sqrt(float(t_end @ C[1:3, 1:3] @ t_end)) < 0.5 * op.map_bias_prior_sigma_m
-    if (
-        abs(u[0]) > op.max_offset_m
-        or _least_bias_ahead(route, end_s, end, b, float(u[3]), params)
-        > op.map_bias_max_prior_sigmas
+    refused: MapBiasRefusal | None = None
+    if abs(u[0]) > op.max_offset_m:
+        refused = "lane too far"
+    elif (
+        _least_bias_ahead(route, end_s, end, b, float(u[3]), params) > op.map_bias_max_prior_sigmas
     ):
+        refused = "too large"
+    if refused is not None:
         map_cov = np.zeros((2, 2))
     elif chi2 < op.map_bias_min_sigmas**2 and not rotated:
         map_cov = op.map_bias_null_sigma_m**2 * np.eye(2)
@@ -434,6 +444,7 @@ def learn_map_bias(
             along_observed=along_observed,
             pivot=end,
             turn_var=turn_var,
+            refused=refused,
         )
     return MapBias(
         offset=b,

@@ -568,6 +568,7 @@ class Driver:
                 rotation_rad=bias.rotation,
                 rotation_sigma_rad=bias.rotation_sigma,
                 applied=bias.significant,
+                refused=bias.refused,
             )
             return dataclasses.replace(rec, map_bias=used)
 

@@ -11,6 +11,7 @@ import numpy as np
 import pytest
 
 from estimator.evaluation.metrics import deviation_series
+from estimator.filter.setup import IMU_GAPS_NAMED, REALIGN_WITHIN_S, imu_gap_warnings
 from estimator.params import Params
 from estimator.pipeline import open_inputs, run_methods
 from estimator.pipeline.inputs import Inputs
@@ -41,10 +42,12 @@ def test_a_gap_in_the_tunnel_is_bridged_with_the_wheel_speed(long_tunnel: Inputs
     t = run.epochs.t[truth.index] - gapped.log.t_start
     after = (t >= 210.0) & (t < 220.0)
     assert after.any() and truth.h_err_m[after].max() < 20.0
-    assert any(w.startswith("IMU gap 150.0-210.0 s") and "wheel speed" in w for w in run.warnings)
-    # it ends in the tunnel: the GNSS return at the portal corrects the heading, not a chord
-    # through the portal's first, noisy fixes
-    assert any(w.startswith("IMU gap 150.0-210.0 s: not re-aligned") for w in run.warnings)
+    # one line for the gap: how it was bridged, and, as it ends in the tunnel, that the GNSS
+    # return at the portal corrects the heading, not a chord through the portal's first,
+    # noisy fixes
+    (note,) = [w for w in run.warnings if "IMU gap" in w and "longer than" not in w]
+    assert note.startswith("IMU gap 150.0-210.0 s: no estimate inside it, the position carried")
+    assert "wheel speed" in note and "; not re-aligned (" in note
 
 
 def test_fixes_inside_a_gap_are_named_and_left_out(long_tunnel: Inputs) -> None:
@@ -65,8 +68,10 @@ def test_after_a_gap_in_open_sky_the_filter_is_re_aligned(long_tunnel: Inputs) -
     gapped = _without_imu(long_tunnel, 20.0, 80.0)
     runs = run_methods(gapped, Params(), methods=("baseline", "proposed"))
     assert gapped.route is not None
-    (note,) = [w for w in runs["baseline"].warnings if "re-aligned from the GNSS track" in w]
-    assert note.startswith("IMU gap 20.0-80.0 s")
+    (note,) = [w for w in runs["baseline"].warnings if w.startswith("IMU gap ")]
+    assert note.startswith("IMU gap 20.0-80.0 s: no estimate inside it")
+    at = float(note.split("; re-aligned from the GNSS track at ")[1].removesuffix(" s"))
+    assert 80.0 < at < 80.0 + REALIGN_WITHIN_S
     for method, lo, hi, limit in (("baseline", 82.0, 103.0, 3.0), ("proposed", 103.0, 459.0, 4.0)):
         run = runs[method]
         truth = deviation_series(run, gapped.route, gapped.log).truth
@@ -74,3 +79,58 @@ def test_after_a_gap_in_open_sky_the_filter_is_re_aligned(long_tunnel: Inputs) -
         t = run.epochs.t[truth.index] - gapped.log.t_start
         between = (t >= lo) & (t < hi)
         assert between.sum() > 50 and truth.h_err_m[between].max() < limit, method
+
+
+def test_a_log_cut_into_many_gaps_gets_a_few_warning_lines(long_tunnel: Inputs) -> None:
+    """long_tunnel cut into 6 s gaps every 7 s (72 gaps): two lines per gap made 144 warning
+    lines; now the first gaps are named, each on one line, and the rest summed up in one that
+    still says how many, where, how long and what was done about them."""
+    imu, t0 = long_tunnel.log.imu, long_tunnel.log.t_start
+    rel = imu.t - t0
+    keep = (rel <= 5.0) | (rel % 7.0 < 1.0)
+    cut = dataclasses.replace(imu, t=imu.t[keep], gyro=imu.gyro[keep], accel=imu.accel[keep])
+    gapped = dataclasses.replace(long_tunnel, log=dataclasses.replace(long_tunnel.log, imu=cut))
+    gap_starts = np.flatnonzero(np.diff(cut.t) > 5.0)
+    n = len(gap_starts)
+    assert n > 50
+    run = run_methods(gapped, Params(), methods=("baseline",))["baseline"]
+    named = [w for w in run.warnings if w.startswith("IMU gap ")]
+    (rest,) = [w for w in run.warnings if "more IMU gaps" in w]
+    assert len(named) == IMU_GAPS_NAMED - 1
+    assert len(run.warnings) <= IMU_GAPS_NAMED + 3
+    assert all("fixes inside it not used; " in w and "re-aligned" in w for w in named)
+    first = cut.t[gap_starts[0]] - t0, cut.t[gap_starts[0] + 1] - t0
+    assert named[0].startswith(f"IMU gap {first[0]:.1f}-{first[1]:.1f} s: ")
+    later = slice(IMU_GAPS_NAMED - 1, n)
+    total = float(np.sum(cut.t[gap_starts[later] + 1] - cut.t[gap_starts[later]]))
+    last_end = cut.t[gap_starts[-1] + 1] - t0
+    assert rest.startswith(f"... and {n - IMU_GAPS_NAMED + 1} more IMU gaps between ")
+    assert f" and {last_end:.1f} s ({total:.1f} s in all, " in rest
+    realigned = int(rest.split("not used; ")[1].split(" re-aligned")[0])
+    not_realigned = int(rest.split("GNSS track, ")[1].split(" not)")[0])
+    assert realigned > 0 and not_realigned > 0  # open sky and tunnel
+    assert realigned + not_realigned == n - IMU_GAPS_NAMED + 1
+
+
+@pytest.mark.parametrize("n", [1, IMU_GAPS_NAMED, IMU_GAPS_NAMED + 1, 5000])
+def test_gap_lines_are_bounded_whatever_the_count(n: int) -> None:
+    start = 10.0 + 20.0 * np.arange(n)
+    end = start + 6.0 + (np.arange(n) % 3)
+    realigned = tuple(None if i % 4 == 3 else float(end[i] + 0.5) for i in range(n))
+    left_out = np.full(n, 30, np.intp)
+    lines = imu_gap_warnings(start, end, left_out, realigned, have_wheel=False)
+    assert len(lines) == min(n, IMU_GAPS_NAMED)
+    named = lines if n <= IMU_GAPS_NAMED else lines[:-1]
+    for i, line in enumerate(named):
+        assert line.startswith(f"IMU gap {start[i]:.1f}-{end[i]:.1f} s: ")
+        assert "held (no wheel speed); 30 fixes inside it not used; " in line
+        assert ("not re-aligned" in line) == (realigned[i] is None)
+    if n > IMU_GAPS_NAMED:
+        k = len(named)
+        again = sum(r is not None for r in realigned[k:])
+        assert lines[-1] == (
+            f"... and {n - k} more IMU gaps between {start[k]:.1f} and {end[-1]:.1f} s "
+            f"({float(np.sum(end[k:] - start[k:])):.1f} s in all, the position held (no wheel "
+            f"speed); {30 * (n - k)} fixes inside them not used; {again} re-aligned from the "
+            f"GNSS track, {n - k - again} not)"
+        )

@@ -329,7 +329,9 @@ def test_deviation_series_of_the_same_run_is_computed_once():
 def test_a_map_bias_the_run_applied_is_said_and_a_right_route_is_taken_as_right() -> None:
     """The Monaco sample with its route drawn 10 m ahead and 3.5 m left of the road (along
     and across the route's overall direction): the note names the outage and a bias applied
-    within a few metres of that; on the right route, a bias not significant."""
+    within a few metres of that; on the right route, a bias not significant; with the route
+    drawn 25 m to the left, a bias refused as another road, which is not said to be "not
+    significant"."""
     import dataclasses
     from pathlib import Path
 
@@ -353,5 +355,22 @@ def test_a_map_bias_the_run_applied_is_said_and_a_right_route_is_taken_as_right(
     ahead = float(note.split("drawn ")[1].split(" m ahead")[0])
     left = float(note.split("ahead and ")[1].split(" m left")[0])
     assert np.hypot(ahead, left) == pytest.approx(np.hypot(10.0, 3.5), abs=3.0)
-    (right,) = map_bias_notes(run_methods(inputs, Params(), methods=("proposed",))["proposed"])
+    right_run = run_methods(inputs, Params(), methods=("proposed",))["proposed"]
+    (right,) = map_bias_notes(right_run)
     assert right.endswith("not significant: the route taken as right")
+    assert all(m.map_bias is None or m.map_bias.refused is None for m in right_run.matches)
+    aside = Route(xy + 25.0 * np.array([-u[1], u[0]]), name="aside")
+    aside_run = run_methods(
+        dataclasses.replace(inputs, route=aside), Params(), methods=("proposed",)
+    )["proposed"]
+    (refused,) = map_bias_notes(aside_run)
+    assert refused.startswith("map bias for the outage at 108.4 s: the route is drawn ")
+    assert refused.endswith(
+        "left of the road driven; not applied: too large for a map's error (another road?)"
+    )
+    left = float(
+        refused.split("ahead and " if "ahead" in refused else "behind and ")[1].split(" m left")[0]
+    )
+    assert left > 10.0
+    used = [m.map_bias for m in aside_run.matches if m.map_bias is not None]
+    assert used and all(b.refused == "too large" and not b.applied for b in used)

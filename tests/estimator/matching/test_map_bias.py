@@ -9,7 +9,7 @@ import numpy as np
 import pytest
 
 from estimator.evaluation.metrics import method_metrics
-from estimator.matching.map_bias import learn_map_bias
+from estimator.matching.map_bias import learn_map_bias, unbiased
 from estimator.params import Params, for_method, with_values
 from estimator.pipeline import open_inputs, run_methods
 from estimator.pipeline.inputs import Inputs
@@ -67,6 +67,23 @@ def test_an_unbiased_map_learns_no_bias() -> None:
     s_end = float(road.project(np.array([1200.0, 0.0])).s[0])
     bias = learn(road, np.zeros(2), s_end)
     assert np.hypot(*bias.offset) < 1.0
+
+
+def test_a_bias_too_large_for_a_map_is_refused_as_another_road_and_says_so() -> None:
+    """A route 25 m to the side of the road driven (5 of the cross-track prior's sigmas): a
+    significant fit, but a parallel road rather than a map's error. It is not applied, and
+    the reason is kept (for the note), also when the next outage carries the finding; a
+    right map is not refused, only not significant."""
+    road = s_bend()
+    s_end = float(road.project(np.array([1200.0, 0.0])).s[0])
+    normal = road.normal_at(np.array([s_end]))[0]
+    far = learn(road, 25.0 * normal, s_end)
+    assert far.refused == "too large"
+    assert not far.significant and np.allclose(far.offset, 0.0)
+    assert far.chi2 > ON.offset.map_bias_min_sigmas**2  # refused, not insignificant
+    assert unbiased(ON, lane=0.0, normal=normal, learned=far).refused == "too large"
+    right = learn(road, np.zeros(2), s_end)
+    assert right.refused is None and not right.significant
 
 
 def test_a_track_on_another_road_teaches_nothing() -> None:
