@@ -475,7 +475,9 @@ def carried_bias(
     """The bias of the previous outage, ``offset`` at its pivot as that outage's matches left
     it, carried to the next outage ``metres`` further along where the driving in between was
     too short to learn one: the map's bias there is the same one, wandered and turned a little
-    further (``offset.map_bias_walk_m_per_sqrt_km``, the rotation's sigma). ``lane_seen``: the
+    further (``offset.map_bias_walk_m_per_sqrt_km``; the rotation's uncertainty, which for a
+    rotation seen but not applied is ``turn_var``, not the zero sigma of the rotation not
+    applied). ``lane_seen``: the
     cross-track offset from the route learned near the portal (lane and map together), at
     ``position`` where the route's left normal is ``normal``. The bias's error is no longer
     the position's (GNSS has since corrected the position), so it is carried independent."""
@@ -483,7 +485,7 @@ def carried_bias(
     d = position - previous.pivot
     here = offset + previous.rotation * np.array([-d[1], d[0]])
     grow = op.map_bias_walk_m_per_sqrt_km**2 * metres / 1000.0
-    grow += previous.rotation_sigma**2 * float(d @ d)
+    grow += max(previous.rotation_sigma**2, previous.turn_var) * float(d @ d)
     cov = np.zeros((3, 3))
     cov[1:, 1:] = previous.measured_cov + grow * np.eye(2)
     gain = np.zeros((3, 2))
