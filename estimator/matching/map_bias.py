@@ -477,10 +477,10 @@ def carried_bias(
     too short to learn one: the map's bias there is the same one, wandered and turned a little
     further (``offset.map_bias_walk_m_per_sqrt_km``; the rotation's uncertainty, which for a
     rotation seen but not applied is ``turn_var``, not the zero sigma of the rotation not
-    applied). ``lane_seen``: the
-    cross-track offset from the route learned near the portal (lane and map together), at
-    ``position`` where the route's left normal is ``normal``. The bias's error is no longer
-    the position's (GNSS has since corrected the position), so it is carried independent."""
+    applied). ``lane_seen``: the cross-track offset from the route learned near the portal
+    (lane and map together), at ``position`` where the route's left normal is ``normal``. The
+    bias's error is no longer the position's (GNSS has since corrected the position), so it
+    is carried independent."""
     op = params.offset
     d = position - previous.pivot
     here = offset + previous.rotation * np.array([-d[1], d[0]])
