@@ -43,6 +43,9 @@ class Gate(Enum):
     ALTERNATIVE_RIGHT = "alternative_right"
     ALTERNATIVE_REVERSED = "alternative_reversed"
     CORRECTION_CAP = "correction_cap"
+    DR_SEPARATION = "dr_separation"
+    """the filter's, after the update: how far the outage's route updates moved the position
+    from dead reckoning (``extensions.dr_separation``)"""
 
     @property
     def rival(self) -> Rival | None:

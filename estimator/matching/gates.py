@@ -94,6 +94,21 @@ ALTERNATIVES = {
     r: GateSpec(Gate.alternative(r), ">=", lambda g: g.alternative_margin, "") for r in Rival
 }
 CORRECTION_CAP = GateSpec(Gate.CORRECTION_CAP, "<=", lambda g: g.max_correction_m, "|z - p_dr|, m")
+DR_SEPARATION = GateSpec(
+    Gate.DR_SEPARATION,
+    "<=",
+    lambda g: g.dr_separation_chi2,
+    "chi-square of the move from dead reckoning over the outage after the update, "
+    "S = P_dr - P; failed: the outage's route updates undone",
+)
+"""not the matcher's but the filter's, tested after the update (``extensions.dr_separation``)"""
+
+
+def undone_gate(chi2: float, at_s: float, g: GateParams) -> GateDecision:
+    """The attempt after the outage's route updates were undone at ``at_s`` (seconds into the
+    log) with separation chi-square ``chi2``: refused with that value."""
+    note = f"the outage's route updates were undone at {at_s:.1f} s: none taken since"
+    return DR_SEPARATION.decide(chi2, g, note=note)
 
 
 def shape_gates(values: ShapeValues, g: GateParams) -> list[GateDecision]:

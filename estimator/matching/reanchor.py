@@ -23,8 +23,9 @@ import numpy as np
 from estimator.params import Params
 from estimator.results import Gate, MatchRecord
 
-BLAMES_THE_FILTER = frozenset({Gate.MAHALANOBIS, Gate.LANE_CONTINUITY})
-"""gates that fail when the filter, not the road, is off"""
+BLAMES_THE_FILTER = frozenset({Gate.MAHALANOBIS, Gate.LANE_CONTINUITY, Gate.DR_SEPARATION})
+"""gates that fail when the filter, not the road, is off (a route update that moved the
+estimate away from a drifting dead reckoning too)"""
 
 
 def drift_bound_m(seconds: float, metres: float, params: Params) -> float:

@@ -182,6 +182,23 @@ class GateParams:
         hi=100,
         step=1,
     )
+    dr_separation_chi2: float = param(
+        13.8,
+        "chi-square bound on how far the outage's route updates may move the position from "
+        "its dead-reckoning twin, against P_dr - P (2 dof; extensions.dr_separation)",
+        lo=1,
+        hi=1000,
+        step=0.5,
+    )
+    dr_separation_floor_m: float = param(
+        1.0,
+        "smallest sigma of the separation from dead reckoning (extensions.dr_separation): "
+        "where the route added almost nothing, P_dr - P is near zero",
+        unit="m",
+        lo=0.01,
+        hi=100,
+        step=0.1,
+    )
     reanchor_gyro_bias_deg_s: float = param(
         0.25,
         "largest unmodelled gyro bias a re-anchor may blame: an innovation larger than the "
@@ -482,6 +499,14 @@ class ExtensionParams:
         "considered map error shared by all of the outage's matches (the measured bias's "
         "second moment less its own covariance): a test that fails to reject zero is no "
         "evidence that the map is exact",
+    )
+    dr_separation: bool = param(
+        True,
+        "run a dead-reckoning twin of the filter through each outage (no route updates) and, "
+        "when the route updates have moved the position further from it than P_dr - P allows "
+        "(gates.dr_separation_chi2), go back to the twin's state and take no more route "
+        "updates in that outage: a map that pulls the estimate away from dead reckoning "
+        "beyond its own confidence is wrong, and so is a filter that believes it",
     )
     map_turn_consider: bool = param(
         True,

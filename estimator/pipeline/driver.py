@@ -35,6 +35,7 @@ from estimator.filter.kernel import finite_state
 from estimator.filter.layout import (
     A_DIST,
     A_DR,
+    A_MAP_AT,
     A_NEXT_OUT,
     A_ROUTE,
     A_TIME,
@@ -54,6 +55,7 @@ from estimator.filter.portal import advance_to_outage
 from estimator.filter.propagation import flush_covariance
 from estimator.filter.route_update import applied_obs_cov, apply_route_match
 from estimator.filter.setup import FilterInputs, prepare_inputs
+from estimator.filter.twin import DeadReckoningTwin, Undone
 from estimator.filter.updates import (
     clone_lane_offset,
     clone_map_turn,
@@ -70,6 +72,7 @@ from estimator.matching import (
     match_geometry,
     route_arc_length,
 )
+from estimator.matching.gates import DR_SEPARATION, undone_gate
 from estimator.matching.kernels import max_turn_deg, search_right, track_window
 from estimator.matching.map_bias import (
     MapBias,
@@ -91,7 +94,7 @@ from estimator.pipeline.reuse import (
     resume,
     reusable_state,
 )
-from estimator.results import Epochs, LongWindow, MapBiasUse, MatchRecord, Run
+from estimator.results import Epochs, Gate, LongWindow, MapBiasUse, MatchRecord, Run
 from estimator.route import Route
 
 F64 = NDArray[np.float64]
@@ -166,7 +169,8 @@ def run(
         warnings=tuple(log.warnings)
         + inputs.warnings
         + (route.warnings if route is not None else ())
-        + gnss_acceptance_warnings(log, epochs, inputs.degraded),
+        + gnss_acceptance_warnings(log, epochs, inputs.degraded)
+        + separation_warnings(driver.records, log.t_start, p),
         _reuse=state,
     )
 
@@ -197,6 +201,26 @@ def gnss_acceptance_warnings(
         "variances that lie, a wrong lever arm or IMU mounting, IMU and GNSS clocks apart, or a "
         "bad start)",
     )
+
+
+def separation_warnings(
+    records: Sequence[MatchRecord], t_start: float, p: Params
+) -> tuple[str, ...]:
+    """One line per outage whose route updates were undone for moving the position too far
+    from dead reckoning (``extensions.dr_separation``)."""
+    lines = []
+    for r in records:
+        if "dr_separation_m" not in r.extra:
+            continue
+        chi2 = next(g.value for g in r.gates if g.gate is Gate.DR_SEPARATION)
+        lines.append(
+            f"route updates undone at {r.t - t_start:.1f} s: they had moved the position "
+            f"{r.extra['dr_separation_m']:.1f} m from dead reckoning (chi-square {chi2:.1f} > "
+            f"{p.gates.dr_separation_chi2:g} against what they added to it); the rest of the "
+            "outage is dead-reckoned: the route there is off the road, or the filter trusted it "
+            "too much"
+        )
+    return tuple(lines)
 
 
 def _frame_of(log: Log) -> LocalFrame:
@@ -253,6 +277,8 @@ class Driver:
         """times of the fixes the fixed-lag re-runs left out"""
         self.copied_whole_run = False
         """the run is the reused one (a baseline after a baseline)"""
+        self.twin: DeadReckoningTwin | None = None
+        """the current outage's dead-reckoning twin (``extensions.dr_separation``)"""
 
     @property
     def route(self) -> Route:
@@ -288,6 +314,7 @@ class Driver:
             if at is not None and i == at.interval:
                 k, dist_a, dist_last = at.k, at.dist_a, at.dist_last
             else:
+                self.twin = None
                 self.dropped_fixes.extend(advance_to_outage(f, a, self.p))
                 dist_a = float(f.aux[A_DIST])
                 dist_last = -math.inf
@@ -307,6 +334,8 @@ class Driver:
                     clone_lane_offset(f.P, f.aux, self.inp.cfg, np.array([-t[1], t[0]]))
                 turn = self.p.extensions.map_turn_consider
                 clone_map_turn(f.P, f.aux, f.x, bias.turn_var if bias is not None and turn else 0.0)
+                if self.p.extensions.dr_separation:
+                    self.twin = DeadReckoningTwin(f.snapshot(), self.inp)
             while True:
                 t_try = a + tr.min_outage_s + k * tr.interval_s
                 if t_try >= b or t_try > self.inp.imu_t[-1]:
@@ -361,6 +390,7 @@ class Driver:
                 n_records=len(self.records),
                 dist_a=dist_a,
                 dist_last=dist_last,
+                twin=None if self.twin is None else self.twin.copy(),
             )
         )
 
@@ -662,9 +692,24 @@ class Driver:
         rec = self.match(f.out, n_out, f.x, f.P, f.aux)
         if not rec.accepted and self.p.extensions.reanchor:
             rec = self._reanchored(rec)
+        twin = self.twin
+        if twin is not None:
+            twin.advance(float(f.aux[A_TIME]), self.log.path)
+            if twin.undone is not None and not rec.reanchored:
+                u = twin.undone
+                gate = undone_gate(u.separation.chi2, u.t - self.log.t_start, self.p.gates)
+                rec = dataclasses.replace(rec, accepted=False, gates=(*rec.gates, gate))
         innovation, correction = rec.innovation, np.zeros(2)
         if rec.accepted:
             innovation, correction, rec = apply_route_match(f, rec, self.p)
+            if twin is not None and rec.reanchored:
+                # the filter's covariance was found not to cover its drift: dead reckoning
+                # starts afresh from the re-anchored state
+                self.twin = DeadReckoningTwin(f.snapshot(), self.inp)
+            elif twin is not None:
+                rec = self._separation_checked(rec, twin)
+                if not rec.accepted:
+                    correction = np.zeros(2)
             if not finite_state(f.x, f.P):
                 raise LogError(
                     self.log.path,
@@ -675,6 +720,24 @@ class Driver:
         rec = dataclasses.replace(rec, epoch=epoch, innovation=innovation, correction=correction)
         self.records.append(rec)
         self.after_match(rec, f.x, f.aux)
+
+    def _separation_checked(self, rec: MatchRecord, twin: DeadReckoningTwin) -> MatchRecord:
+        """``rec`` (just applied) with its dead-reckoning separation gate; when it fails, the
+        outage's route updates are undone: the filter goes back to its twin, which took none
+        of them, and takes no more in this outage (:mod:`estimator.filter.twin`)."""
+        f, g = self.filt, self.p.gates
+        sep = twin.separation(f.x, f.P, floor_m=g.dr_separation_floor_m)
+        gate = DR_SEPARATION.decide(sep.chi2, g)
+        rec = dataclasses.replace(rec, gates=(*rec.gates, gate))
+        if gate.passed:
+            return rec
+        twin.undone = Undone(rec.t, sep)
+        f.x[:] = twin.x
+        f.P[:] = twin.P
+        f.aux[A_ROUTE : A_ROUTE + 3] = twin.aux[A_ROUTE : A_ROUTE + 3]
+        f.aux[A_MAP_AT : A_MAP_AT + 2] = twin.aux[A_MAP_AT : A_MAP_AT + 2]
+        extra = {**rec.extra, "dr_separation_m": sep.metres}
+        return dataclasses.replace(rec, accepted=False, extra=extra)
 
     def _reanchored(self, rec: MatchRecord) -> MatchRecord:
         """``rec`` accepted as a re-anchor (:mod:`estimator.matching.reanchor`) after widening

@@ -22,11 +22,12 @@ from estimator.filter.engine import FilterState
 from estimator.filter.layout import A_TIME, I_OUT, O_POS
 from estimator.filter.propagation import flush_covariance
 from estimator.filter.setup import FilterInputs
+from estimator.filter.twin import DeadReckoningTwin
 from estimator.log import Log
 from estimator.matching.reanchor import blames_the_filter
 from estimator.nav.frames import LocalFrame
 from estimator.params import Params, matching_params
-from estimator.results import MatchRecord, Run
+from estimator.results import Gate, MatchRecord, Run
 from estimator.route import Route
 
 if TYPE_CHECKING:
@@ -50,6 +51,8 @@ class Checkpoint:
     n_records: int
     dist_a: float
     dist_last: float
+    twin: DeadReckoningTwin | None = None
+    """the outage's dead-reckoning twin as it was then (``extensions.dr_separation``)"""
 
     @property
     def n_out(self) -> int:
@@ -187,6 +190,12 @@ def resume(d: Driver, old: ReuseState, old_params: Params, *, reuse_matching: bo
         and p.extensions.unapplied_bias_consider == old_params.extensions.unapplied_bias_consider
         and p.extensions.map_turn_consider == old_params.extensions.map_turn_consider
         and p.extensions.reanchor == old_params.extensions.reanchor
+        and p.extensions.dr_separation == old_params.extensions.dr_separation
+        and (
+            not p.extensions.dr_separation
+            or (p.gates.dr_separation_chi2, p.gates.dr_separation_floor_m)
+            == (old_params.gates.dr_separation_chi2, old_params.gates.dr_separation_floor_m)
+        )
         and (
             not p.extensions.reanchor
             or (p.gates.reanchor_after, p.gates.reanchor_gyro_bias_deg_s)
@@ -227,12 +236,15 @@ def _replay_attempts(d: Driver, old: ReuseState) -> None:
         prev = old.records[cp.n_records]
         # whether a refusal re-anchors depends on the live filter: judged live from there
         may_reanchor = d.p.extensions.reanchor and blames_the_filter(rec, d.p)
-        if not same_outcome(rec, prev) or may_reanchor:
+        separation = [g for g in prev.gates if g.gate is Gate.DR_SEPARATION]
+        # an update the twin's gate undid, or one after it, was judged on the live filter
+        if not same_outcome(rec, prev) or may_reanchor or not all(g.passed for g in separation):
             _restart(d, old, cp, n_cp + 1, records)
             d.loop(cp.interval, cp)
             return
         rec = dataclasses.replace(
             rec,
+            gates=(*rec.gates, *separation),
             epoch=prev.epoch,
             innovation=prev.innovation,
             correction=prev.correction,
@@ -261,4 +273,5 @@ def _restart(
     d.records = list(records)
     d.dropped_fixes = [t for t in old.dropped_fixes if t <= cp.state[2][A_TIME]]
     d.filt.set_state(cp.state)
+    d.twin = None if cp.twin is None else cp.twin.copy()
     d.filt.out = old.out.copy()

@@ -1,0 +1,121 @@
+"""The dead-reckoning twin of an outage: the filter cloned at the outage start and run on without
+any route update, for solution separation (``extensions.dr_separation``).
+
+A route update only adds information to dead reckoning, so between the filter that took the
+outage's pseudo-positions and its twin that took none, the separation ``x_f - x_d`` has the
+covariance ``P_d - P_f`` when both covariances are honest: the solution-separation test of
+receiver autonomous integrity monitoring, with the route in place of a satellite. A route that
+pulls the estimate further from dead reckoning than that allows is a wrong map, or the filter
+believes the route more than it should: either way the pulled estimate is not to be trusted,
+and the twin's is the one that took nothing from it."""
+
+from __future__ import annotations
+
+import math
+from dataclasses import dataclass
+
+import numpy as np
+from numpy.typing import NDArray
+
+from estimator.errors import LogError
+from estimator.filter.engine import FilterState
+from estimator.filter.kernel import run_until
+from estimator.filter.layout import (
+    E_POS,
+    I_OUT,
+    NO,
+    STATUS_DIVERGED,
+    STATUS_FULL,
+    X_POS,
+)
+from estimator.filter.propagation import flush_covariance
+from estimator.filter.setup import FilterInputs
+
+F64 = NDArray[np.float64]
+
+ROWS = 64
+"""output rows the twin writes into before starting over (nobody reads them)"""
+
+
+@dataclass(frozen=True)
+class Separation:
+    """The filter's horizontal position against its dead-reckoning twin's."""
+
+    offset: F64
+    """(2,) E, N: filter minus twin, m"""
+    cov: F64
+    """(2, 2) ``P_d - P_f``, its eigenvalues floored at the floor's square"""
+    chi2: float
+    """``offset^T cov^-1 offset``"""
+
+    @property
+    def metres(self) -> float:
+        return float(math.hypot(*self.offset))
+
+
+@dataclass(frozen=True)
+class Undone:
+    """The attempt at which an outage's route updates were undone."""
+
+    t: float
+    """its time (log clock), s"""
+    separation: Separation
+
+
+class DeadReckoningTwin:
+    """The filter's state at an outage start (``state``), run on without route updates;
+    ``undone`` once the outage's route updates were given up for it."""
+
+    def __init__(
+        self, state: FilterState, inputs: FilterInputs, *, rows: F64 | None = None
+    ) -> None:
+        x, P, aux, idx = state
+        self.x, self.P, self.aux, self.idx = x.copy(), P.copy(), aux.copy(), idx.copy()
+        self.idx[I_OUT] = 0
+        self.inp = inputs
+        self.rows: F64 = np.zeros((ROWS, NO)) if rows is None else rows
+        """scratch for the kernel's output rows, shared by copies"""
+        self.undone: Undone | None = None
+
+    def copy(self) -> DeadReckoningTwin:
+        """A copy of the state (a checkpoint's)."""
+        twin = DeadReckoningTwin((self.x, self.P, self.aux, self.idx), self.inp, rows=self.rows)
+        twin.undone = self.undone
+        return twin
+
+    def advance(self, t_stop: float, source: str) -> None:
+        """Dead-reckon to ``t_stop`` (no fix: the twin lives inside an outage) and propagate
+        the covariance to it."""
+        inp = self.inp
+        no_t, no_xyz = np.empty(0), np.empty((0, 3))
+        while True:
+            status = run_until(
+                t_stop, self.x, self.P, self.aux, self.idx, inp.imu_t, inp.gyro, inp.accel,
+                inp.still, inp.wheel_t, inp.wheel_v, no_t, no_xyz, no_xyz, inp.cfg, self.rows,
+            )  # fmt: skip
+            if status == STATUS_FULL:
+                self.idx[I_OUT] = 0
+                continue
+            if status == STATUS_DIVERGED:
+                raise LogError(source, "the dead-reckoning twin diverged (non-finite state)")
+            break
+        flush_covariance(self.P, self.aux, inp.cfg)
+
+    def separation(self, x: F64, P: F64, *, floor_m: float) -> Separation:
+        """How far the filter (``x``, ``P``, at the twin's time) has moved from dead reckoning
+        (:func:`separation`)."""
+        return separation(x, P, self.x, self.P, floor_m=floor_m)
+
+
+def separation(x: F64, P: F64, x_dr: F64, P_dr: F64, *, floor_m: float) -> Separation:
+    """How far the filter (``x``, ``P``) has moved from dead reckoning (``x_dr``, ``P_dr``),
+    against how far the information it gained allows: ``P_dr - P``, whose sigmas are floored at
+    ``floor_m`` (where the route added next to nothing it is near zero)."""
+    pos = slice(E_POS, E_POS + 2)
+    offset: F64 = x[X_POS : X_POS + 2] - x_dr[X_POS : X_POS + 2]
+    diff = P_dr[pos, pos] - P[pos, pos]
+    w, v = np.linalg.eigh(0.5 * (diff + diff.T))
+    w = np.maximum(w, floor_m * floor_m)
+    cov: F64 = (v * w) @ v.T
+    along_axes = v.T @ offset
+    return Separation(offset, cov, float(np.sum(along_axes * along_axes / w)))
