@@ -54,6 +54,10 @@ class FitSettings:
     is cross-track noise (with ``geometry_covariance``)"""
     weak_along_track: bool = False
     """``extensions.weak_along_track``: along-track weaker than the filter's is not used"""
+    window_scale_sigma_m: float = 0.0
+    """``extensions.window_scale_covariance``: 1-sigma of the attempt's window length error
+    (the filter's along-track velocity sigma times the window's duration), added to an
+    observed along-track sigma; set per attempt (:meth:`with_window_scale`)"""
 
     @classmethod
     def of(cls, params: Params) -> FitSettings:
@@ -68,6 +72,12 @@ class FitSettings:
         if k_half <= max(int(np.ceil(params.window.along_search_m / step)), 1):
             return _settings(params)
         return _widened(params, k_half)
+
+    def with_window_scale(self, sigma_m: float) -> FitSettings:
+        """These settings for a window whose length is uncertain by ``sigma_m`` (1-sigma)."""
+        if not (np.isfinite(sigma_m) and sigma_m > 0.0):
+            return self
+        return dataclasses.replace(self, window_scale_sigma_m=float(sigma_m))
 
 
 @functools.lru_cache(maxsize=64)
@@ -198,6 +208,10 @@ def fit_window(
         q,
         settings.plausible_place,
     )
+    if observed and settings.window_scale_sigma_m > 0.0:
+        sigma = float(np.hypot(sigma, settings.window_scale_sigma_m))
+        if sigma >= settings.along_sigma_max_m:
+            observed, sigma = False, settings.along_sigma_max_m
     idx = np.flatnonzero(valid)
     n_pairs = len(idx)
     if n_pairs < 2:

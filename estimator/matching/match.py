@@ -149,8 +149,13 @@ def match_geometry(
     s_guess: float | None,
     lane_offset: float,
     params: Params,
+    window_scale_sigma_m: float = 0.0,
 ) -> MatchGeometry:
-    """The fits of :func:`match_window` (same arguments), before its gates."""
+    """The fits of :func:`match_window` (same arguments), before its gates.
+
+    ``window_scale_sigma_m``: 1-sigma of the window's length error, with
+    ``extensions.window_scale_covariance`` added to the along-track sigma of the candidate's
+    and the rivals' fits (the caller knows the window's duration and velocity covariance)."""
     win_raw, p, cov = _check_inputs(window_xy, p_dr, pos_cov2)
     enabled = params.offset.enabled and np.isfinite(lane_offset)
     lane = float(lane_offset) if enabled else 0.0
@@ -167,6 +172,8 @@ def match_geometry(
     search = search_half_width(road, s_anchor + span, cov, params)
     pad = search + 2.0 * h
     settings = FitSettings.searching(params, search)
+    if params.extensions.window_scale_covariance:
+        settings = settings.with_window_scale(window_scale_sigma_m)
     fit = None
     if lane_path:
         cand = local_piece(road, lane, s_anchor - pad, s_anchor + span + pad)

@@ -479,12 +479,20 @@ class ExtensionParams:
         "without wheel speed the dead-reckoned position slides hundreds of metres along the "
         "road, and a bend searched only +-30 m around it is paired with the wrong stretch",
     )
+    window_scale_covariance: bool = param(
+        False,
+        "a fit's along-track variance includes the window's own length error: the filter's "
+        "velocity sigma along the track times the window's duration. Dead-reckoned without "
+        "wheel speed, the window is stretched or shrunk by the velocity error, and a bend "
+        "fitted with a stretched window is placed that much off along the road, the same way "
+        "attempt after attempt",
+    )
     no_wheel_caution: bool = param(
         True,
-        "on a log without wheel speed, switch on covariance_search, curvature_covariance and "
-        "overlap_inflation (the dead-reckoned along-track position is then uncertain by tens "
-        "to hundreds of metres, which is what they are for); a log with wheel speed is "
-        "matched as the other switches say",
+        "on a log without wheel speed, switch on covariance_search, curvature_covariance, "
+        "overlap_inflation and window_scale_covariance (the dead-reckoned along-track position "
+        "is then uncertain by tens to hundreds of metres, which is what they are for); a log "
+        "with wheel speed is matched as the other switches say",
     )
     map_bias: bool = param(
         True,
@@ -757,7 +765,11 @@ def matching_params(params: Params, *, have_wheel: bool) -> Params:
     if have_wheel or not ext.no_wheel_caution:
         return params
     cautious = replace(
-        ext, covariance_search=True, curvature_covariance=True, overlap_inflation=True
+        ext,
+        covariance_search=True,
+        curvature_covariance=True,
+        overlap_inflation=True,
+        window_scale_covariance=True,
     )
     return params if cautious == ext else replace(params, extensions=cautious)
 

@@ -43,6 +43,7 @@ from estimator.filter.layout import (
     C_OUT_DT,
     E_MAP,
     E_POS,
+    E_VEL,
     I_IMU,
     O_DIST,
     O_DR,
@@ -50,6 +51,7 @@ from estimator.filter.layout import (
     O_POS,
     O_SIG_POS,
     O_T,
+    X_VEL,
 )
 from estimator.filter.portal import advance_to_outage
 from estimator.filter.propagation import flush_covariance
@@ -578,9 +580,14 @@ class Driver:
         pred = self._predicted_s(aux)
         w = self.p.window
 
-        def attempt(window_xy: F64, params: Params) -> MatchRecord:
+        def attempt(window_xy: F64, params: Params, length_m: float) -> MatchRecord:
+            scale = (
+                window_scale_sigma(out, n_out, x, P, aux, length_m)
+                if params.extensions.window_scale_covariance
+                else 0.0
+            )
             geometry = self._geometry(
-                window_xy, x[:2].copy(), position_on_map_cov(P), pred, params, aux
+                window_xy, x[:2].copy(), position_on_map_cov(P), pred, params, aux, scale
             )
             rec = judge_match(
                 geometry, params, index=len(self.records), t=float(aux[A_TIME]), epoch=n_out
@@ -602,7 +609,7 @@ class Driver:
             )
             return dataclasses.replace(rec, map_bias=used)
 
-        rec = attempt(self._window(out, n_out, x, aux, w.length_m), self.p)
+        rec = attempt(self._window(out, n_out, x, aux, w.length_m), self.p, w.length_m)
         if not (
             self.p.extensions.long_window
             and w.long_length_m > w.length_m
@@ -625,6 +632,7 @@ class Driver:
         long = attempt(
             long_xy,
             dataclasses.replace(self.p, pseudo=dataclasses.replace(po, shape_noise_m=noise)),
+            w.long_length_m,
         )
         if not (long.accepted and long.along_observed):
             return rec
@@ -638,6 +646,7 @@ class Driver:
         pred: float | None,
         params: Params,
         aux: F64,
+        window_scale_sigma_m: float = 0.0,
     ) -> MatchGeometry:
         """:func:`match_geometry` of an attempt, or the previous run's for the same inputs
         (window, position, covariance, route guess, lane offset, map bias and the parameters
@@ -661,10 +670,17 @@ class Driver:
                 tr.biased_key = key
             route, bias_key = tr.biased_route, key
         return self.memo.get(
-            ("geometry", pred, lane, bias_key, geometry_params(params)),
+            ("geometry", pred, lane, bias_key, geometry_params(params), window_scale_sigma_m),
             (window_xy, p_dr, cov),
             lambda: match_geometry(
-                window_xy, p_dr, cov, route, s_guess=pred, lane_offset=lane, params=params
+                window_xy,
+                p_dr,
+                cov,
+                route,
+                s_guess=pred,
+                lane_offset=lane,
+                params=params,
+                window_scale_sigma_m=window_scale_sigma_m,
             ),
         )
 
@@ -823,6 +839,26 @@ def widen_to_innovation(P: F64, y: F64, s: F64) -> None:
     c = size * size - 1.0 / a if a > 0 else 0.0
     if c > 0.0:
         P[E_POS : E_POS + 2, E_POS : E_POS + 2] += c * np.outer(u, u)
+
+
+def window_scale_sigma(out: F64, n_out: int, x: F64, P: F64, aux: F64, length_m: float) -> float:
+    """1-sigma of the length error of the window over the last ``length_m`` of travel: the
+    filter's velocity sigma along the direction of travel times the window's duration
+    (``extensions.window_scale_covariance``).
+
+    Dead-reckoned without wheel speed the window's length is the integral of a velocity that
+    is wrong by that sigma; a bend matched with a window stretched by ``dv T`` is placed up to
+    ``dv T`` off along the road, and the next attempts, sharing the window, the same way."""
+    dist = out[:n_out, O_DIST]
+    i0 = max(search_right(dist, float(aux[A_DIST]) - length_m) - 1, 0)
+    duration = float(aux[A_TIME]) - float(out[i0, O_T]) if n_out > 0 else 0.0
+    v = x[X_VEL : X_VEL + 2]
+    speed = float(np.hypot(v[0], v[1]))
+    if not (duration > 0.0 and speed > 0.0):
+        return 0.0
+    u = v / speed
+    var = float(u @ P[E_VEL : E_VEL + 2, E_VEL : E_VEL + 2] @ u)
+    return math.sqrt(max(var, 0.0)) * duration
 
 
 def position_on_map_cov(P: F64) -> F64:

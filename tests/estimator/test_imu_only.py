@@ -11,14 +11,17 @@ import pytest
 
 from estimator.errors import LogError
 from estimator.evaluation.metrics import method_metrics
+from estimator.filter import layout as ly
 from estimator.io import TopicChoice
-from estimator.matching.fit import _bend_variance
+from estimator.matching.fit import FitSettings, _bend_variance, fit_window
 from estimator.matching.geometry import Polyline
 from estimator.matching.match import search_half_width
 from estimator.params import Params, for_method, load_params, matching_params, with_values
 from estimator.pipeline import open_inputs, run_methods
+from estimator.pipeline.driver import window_scale_sigma
 from estimator.route import Route
 from estimator.sim.imu_only import build_imu_only, imu_only_spec
+from estimator.sim.stress import build, drive_spec
 
 REPO = Path(__file__).resolve().parents[2]
 COMMA = REPO.parent / "shared" / "data" / "comma2k19"
@@ -39,6 +42,7 @@ def test_the_caution_is_only_for_logs_without_wheel_speed() -> None:
     assert matching_params(p, have_wheel=True) is p
     ext = matching_params(p, have_wheel=False).extensions
     assert ext.covariance_search and ext.curvature_covariance and ext.overlap_inflation
+    assert ext.window_scale_covariance and not p.extensions.window_scale_covariance
     off = with_values(p, {"extensions.no_wheel_caution": False})
     assert matching_params(off, have_wheel=False) is off
     paper = for_method(p, "paper")
@@ -72,6 +76,48 @@ def test_a_bend_under_an_uncertain_along_track_is_cross_track_noise() -> None:
     assert var == pytest.approx(3 * 100.0**4 / (4 * radius**2), rel=0.05)
     # a shape that observed along-track to 2 m leaves almost nothing of it
     assert _bend_variance(road, s_mid, tangent, normal, cov, 2.0, True) < 1e-4 * var
+
+
+def test_a_window_of_uncertain_length_claims_less_along_track() -> None:
+    """A corner observes along-track to metres; a window whose length is uncertain by tens of
+    metres places the corner that much less surely, and one uncertain beyond
+    ``pseudo.along_sigma_max_m`` not at all."""
+    params = Params()
+    route = Route(np.array([[0.0, 0.0], [300.0, 0.0], [300.0, 300.0]]))
+    road = Polyline.of(route)
+    win = route.point_at(np.arange(150.0, 400.0 + 1e-9, params.window.spacing_m))
+    settings = FitSettings.of(params)
+    assert settings.with_window_scale(0.0) is settings
+    sharp = fit_window(win, win[-1], road, 150.0, 0.0, settings)
+    assert sharp is not None and sharp.along_observed
+    assert sharp.along_sigma < 5.0
+    wide = fit_window(win, win[-1], road, 150.0, 0.0, settings.with_window_scale(20.0))
+    assert wide is not None and wide.along_observed
+    assert wide.along_sigma == pytest.approx(float(np.hypot(sharp.along_sigma, 20.0)))
+    tangent = wide.tangent
+    assert float(tangent @ wide.obs_cov @ tangent) == pytest.approx(wide.along_sigma**2)
+    lost = fit_window(win, win[-1], road, 150.0, 0.0, settings.with_window_scale(500.0))
+    assert lost is not None and not lost.along_observed
+    assert lost.along_sigma == params.pseudo.along_sigma_max_m
+
+
+def test_the_window_length_sigma_is_the_velocity_sigma_along_travel_times_its_duration() -> None:
+    n = 11
+    out = np.zeros((n, ly.NO))
+    out[:, ly.O_T] = np.arange(n, dtype=float)
+    out[:, ly.O_DIST] = 10.0 * np.arange(n)
+    aux = np.zeros(ly.NA)
+    aux[ly.A_TIME], aux[ly.A_DIST] = 10.0, 100.0
+    x = np.zeros(ly.NX)
+    x[ly.X_VEL : ly.X_VEL + 2] = [10.0, 0.0]
+    P = np.eye(ly.NE)
+    P[ly.E_VEL : ly.E_VEL + 2, ly.E_VEL : ly.E_VEL + 2] = np.diag([0.2**2, 3.0**2])
+    # the last 50 m took 5 s; along travel (East) the velocity is uncertain by 0.2 m/s
+    assert window_scale_sigma(out, n, x, P, aux, 50.0) == pytest.approx(1.0)
+    x[ly.X_VEL : ly.X_VEL + 2] = [0.0, 10.0]
+    assert window_scale_sigma(out, n, x, P, aux, 50.0) == pytest.approx(15.0)
+    x[ly.X_VEL : ly.X_VEL + 2] = 0.0
+    assert window_scale_sigma(out, n, x, P, aux, 50.0) == 0.0
 
 
 def test_an_imu_only_drive_is_a_pure_function_of_its_index_and_has_its_faults() -> None:
@@ -128,3 +174,13 @@ def test_comma2k19_without_wheel_speed_routefuse_is_no_worse_than_dead_reckoning
     baseline = _truth_rmse(inputs, params, "baseline", outage)
     proposed = _truth_rmse(inputs, params, "proposed", outage)
     assert proposed <= baseline
+
+
+def test_a_no_odometer_drive_on_a_biased_map_is_no_worse_than_dead_reckoning() -> None:
+    """Stress drive 2: the multi-tunnel without wheel speed on a map 8.9 m off along the road
+    (its bias learned on the approach and carried through the tunnels)."""
+    drive = build(drive_spec(2))
+    inputs = drive.inputs
+    assert inputs.log.wheel is None
+    baseline = _truth_rmse(inputs, Params(), "baseline")
+    assert _truth_rmse(inputs, Params(), "proposed") <= baseline
