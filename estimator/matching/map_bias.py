@@ -94,8 +94,9 @@ class MapBias:
     """the track fixed the along-track bias to better than half its prior"""
     turn_var: float = 0.0
     """variance of the map's rotation error, rad^2: the applied rotation's, or the second
-    moment of one fitted but not applied (its square less its own variance); the outage's
-    pseudo-positions carry it as a considered state (``extensions.map_turn_consider``)"""
+    moment of one fitted but not applied (its square less its own variance, or plus it with
+    ``extensions.map_turn_estimate``); the outage's pseudo-positions carry it as a considered
+    state (``extensions.map_turn_consider``) or estimate it"""
     refused: MapBiasRefusal | None = None
     """why ``measured`` was not applied whatever its significance: too large for a map's
     error, or with a lane too far from the route (another road); None otherwise"""
@@ -395,6 +396,10 @@ def learn_map_bias(
         # a rotation not applied leaves the map turned by what the fit saw, less what its own
         # noise explains (a right map within its noise gains nothing)
         turn_var = max(float(u[3] ** 2 - total[3, 3]), 0.0)
+        if params.extensions.map_turn_estimate:
+            # estimated in the outage, the rotation error can start from its honest second
+            # moment (taking it as zero given N(u3, total33)): the matches will narrow it
+            turn_var = float(u[3] ** 2 + total[3, 3])
         # a rotation no test tells from zero is not applied, nor does its sigma, extrapolated
         # from the approach into a long tunnel, swamp the bias learned at the portal
         u3, C3, G3 = _solve(A[:, :3], d, weights, P0[:3, :3], nrm, mean[:3])

@@ -492,6 +492,14 @@ class ExtensionParams:
         "walk (which repeated matches average away while they turn the heading to the map's, "
         "but which lets them re-estimate an applied bias where the road turns)",
     )
+    map_turn_estimate: bool = param(
+        False,
+        "estimate the map's rotation error in the outage instead of only considering it "
+        "(where the outage's pseudo-positions estimate the map's bias), its prior the honest "
+        "second moment of the rotation fitted on the approach (applied or not: its square "
+        "plus its variance), and match to the route turned back by what was learned: an "
+        "honest prior that the matches cannot reduce costs the right maps for the whole outage",
+    )
 
 
 @dataclass(frozen=True)
