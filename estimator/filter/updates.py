@@ -160,14 +160,12 @@ def _apply_gain(
             for b in range(m):
                 acc += PHt[i, b] * Si[b, a]
             K[i, a] = acc  # K = P H^T S^-1
-    for i in range(E_LANE, last_considered):
-        for a in range(m):
-            K[i, a] = 0.0
-    if not rot_est:
-        for a in range(m):
-            K[E_ROT, a] = 0.0
     for i in range(NE):
-        considered = E_LANE <= i < last_considered or (i == E_ROT and not rot_est)
+        if (E_LANE <= i < last_considered or i == E_ROT) and not (i == E_ROT and rot_est):
+            for a in range(m):
+                K[i, a] = 0.0
+    for i in range(NE):
+        considered = (E_LANE <= i < last_considered or i == E_ROT) and not (i == E_ROT and rot_est)
         for j in range(i, NE):
             acc = 0.0
             for a in range(m):

@@ -493,7 +493,7 @@ class ExtensionParams:
         "but which lets them re-estimate an applied bias where the road turns)",
     )
     map_turn_estimate: bool = param(
-        False,
+        True,
         "estimate the map's rotation error in the outage instead of only considering it "
         "(where the outage's pseudo-positions estimate the map's bias), its prior the honest "
         "second moment of the rotation fitted on the approach (applied or not: its square "

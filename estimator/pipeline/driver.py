@@ -20,7 +20,6 @@ from __future__ import annotations
 
 import dataclasses
 import math
-import os
 from collections.abc import Callable, Sequence
 from dataclasses import dataclass
 from typing import Literal
@@ -674,9 +673,7 @@ class Driver:
     def _turn_estimated(self, bias: MapBias | None) -> bool:
         """The outage's pseudo-positions estimate the map's rotation error: where they
         estimate its bias (an applied bias)."""
-        if bias is None or self.inp.cfg[C_ROUTE_EST] <= 0:
-            return False
-        return bias.significant or os.environ.get("RF_ROT_UNAPPLIED") == "1"
+        return bias is not None and bias.significant and self.inp.cfg[C_ROUTE_EST] > 0
 
     def after_match(self, rec: MatchRecord, x_after: F64, aux: F64) -> None:
         """Follow the vehicle along the route after an accepted match."""
