@@ -95,7 +95,7 @@ class MapBias:
     turn_var: float = 0.0
     """variance of the map's rotation error, rad^2: the applied rotation's, or the second
     moment of one fitted but not applied (its square less its own variance; plus it where the
-    bias is applied and ``extensions.map_turn_estimate``); the outage's pseudo-positions carry
+    bias is applied and ``offset.map_turn_honest_prior``); the outage's pseudo-positions carry
     it as a considered state (``extensions.map_turn_consider``) or estimate it"""
     refused: MapBiasRefusal | None = None
     """why ``measured`` was not applied whatever its significance: too large for a map's
@@ -118,6 +118,19 @@ def xy_moved_back(xy: F64, offset: F64, rotation: float, pivot: F64) -> F64:
     d = xy - pivot
     out: F64 = xy - offset - rotation * np.column_stack([-d[:, 1], d[:, 0]])
     return out
+
+
+def turned_back(
+    offset: F64, rotation: float, pivot: F64, *, turn: float, shift: F64
+) -> tuple[F64, float]:
+    """The bias ``offset`` at ``pivot`` and ``rotation`` about it after an outage's matches
+    turned the map back by ``turn`` about the origin and shifted it by ``shift``
+    (``extensions.map_turn_estimate``): each correction ``dr`` of the rotation error at the
+    vehicle's position ``a`` moves the map by ``dr J (q - a)``, which the filter sums as a turn
+    about the origin and a shift ``-dr J a``; as a shift at the pivot and a turn about it, the
+    same field is ``offset + shift + turn J pivot`` and ``rotation + turn``."""
+    moved: F64 = offset + shift + turn * np.array([-pivot[1], pivot[0]])
+    return moved, rotation + turn
 
 
 def _result(
@@ -398,7 +411,7 @@ def learn_map_bias(
         # noise explains (a right map within its noise gains nothing)
         turn_var = max(float(u[3] ** 2 - total[3, 3]), 0.0)
         honest_turn_var = turn_var
-        if params.extensions.map_turn_estimate:
+        if params.extensions.map_turn_estimate and op.map_turn_honest_prior:
             # with the bias applied the outage's matches estimate the rotation error, which can
             # then start from its honest second moment (taking it as zero given N(u3, total33))
             honest_turn_var = float(u[3] ** 2 + total[3, 3])

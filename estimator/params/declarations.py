@@ -373,6 +373,15 @@ class OffsetParams:
         "with that rotation and its sigma (a map drawn turned about a point far into a long "
         "tunnel is metres off at the portal)",
     )
+    map_turn_honest_prior: bool = param(
+        False,
+        "with extensions.map_turn_estimate, an applied bias whose fitted rotation is not "
+        "applied starts the outage's rotation error from its honest second moment (the "
+        "rotation's square plus its variance) instead of the method of moments (its square "
+        "less its variance, often zero): the matches cannot tell the map's rotation from the "
+        "dead-reckoned heading's drift, so on a right map they then turn the map instead of "
+        "the heading",
+    )
     map_bias_max_residual_m: float = param(
         3.0,
         "a GNSS track fitting the route worse than this (RMS) teaches no bias (another road)",
@@ -494,11 +503,11 @@ class ExtensionParams:
     )
     map_turn_estimate: bool = param(
         True,
-        "estimate the map's rotation error in the outage instead of only considering it "
-        "(where the outage's pseudo-positions estimate the map's bias), its prior the honest "
-        "second moment of the rotation fitted on the approach (applied or not: its square "
-        "plus its variance), and match to the route turned back by what was learned: an "
-        "honest prior that the matches cannot reduce costs the right maps for the whole outage",
+        "estimate the map's rotation error in the outage instead of only considering it, "
+        "where the outage's pseudo-positions estimate the map's bias (an applied bias), match "
+        "to the route turned back by what they learned and carry it to the next outage; where "
+        "the bias is not applied it stays considered (the matches cannot tell the map's "
+        "rotation from the heading's drift, which on a right map they would take for it)",
     )
 
 

@@ -81,6 +81,7 @@ from estimator.matching.map_bias import (
     learn_map_bias,
     prior_bias,
     refined_bias,
+    turned_back,
     unbiased,
     xy_moved_back,
 )
@@ -656,11 +657,10 @@ class Driver:
         assert bias is not None
         offset: F64 = bias.offset + aux[A_ROUTE + 1 : A_ROUTE + 3]
         if aux[A_ROT_EST] > 0:
-            # the rotation learned turned the map about the origin (A_ROT, A_ROT_SHIFT): the
-            # same field as a shift at the pivot and a turn about it (_route_turn)
-            pivot = bias.pivot
-            offset = offset + aux[A_ROT_SHIFT : A_ROT_SHIFT + 2]
-            offset = offset + float(aux[A_ROT]) * np.array([-pivot[1], pivot[0]])
+            shift = aux[A_ROT_SHIFT : A_ROT_SHIFT + 2]
+            offset = turned_back(
+                offset, bias.rotation, bias.pivot, turn=float(aux[A_ROT]), shift=shift
+            )[0]
         return offset, bias.lane + float(aux[A_ROUTE])
 
     def _route_turn(self, aux: F64) -> float:
