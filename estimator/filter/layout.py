@@ -37,7 +37,7 @@ E_GW = 16  # (3)
 # considered states (Schmidt: never corrected, their gain is zero) come last, from E_LANE on
 E_LANE = 19  # the lane-offset error the route pseudo-positions keep
 E_MAP = 20  # (2) the map-bias error E, N the route pseudo-positions keep (extensions.map_bias)
-E_ROT = 22  # the map's rotation error (rad), always considered (extensions.map_turn_consider)
+E_ROT = 22  # the map's rotation error (rad), considered but where extensions.map_turn_estimate
 NE = 23
 
 # aux: bookkeeping
@@ -65,7 +65,10 @@ A_USED_DIST = 39  # A_DIST at the last fix used
 A_ROUTE = 40  # (3) lane-offset and map-bias (E, N) errors estimated since the outage start
 A_ROUTE_EST = 43  # 1: this outage's route pseudo-positions estimate them
 A_MAP_AT = 44  # (2) E, N where E_MAP is the map-bias error (E_ROT turns it elsewhere)
-NA = 46
+A_ROT_EST = 46  # 1: this outage's route pseudo-positions estimate the map's rotation error
+A_ROT = 47  # the map's rotation error estimated since the outage start, rad
+A_ROT_SHIFT = 48  # (2) with it, the map's shift at the origin: sum of -dr J a (a = A_MAP_AT)
+NA = 50
 
 # idx
 I_IMU, I_WHEEL, I_GNSS, I_OUT, NI = 0, 1, 2, 3, 4

@@ -18,6 +18,9 @@ from estimator.filter.layout import (
     A_GYRO_SUM,
     A_INFLATE,
     A_MAP_AT,
+    A_ROT,
+    A_ROT_EST,
+    A_ROT_SHIFT,
     A_ROUTE,
     A_ROUTE_EST,
     C_AID_DT,
@@ -129,7 +132,7 @@ def apply_update(x: F64, P: F64, y: F64, m: int, PHt: F64, Si: F64, scale_on: bo
     the nominal state at once, so it is zero between updates)."""
     K = np.empty((NE, 3))
     dx = np.empty(NE)
-    _apply_gain(x, P, y, m, PHt, Si, scale_on, K, dx, NE)
+    _apply_gain(x, P, y, m, PHt, Si, scale_on, K, dx, NE, False)
 
 
 @kernel
@@ -144,25 +147,25 @@ def _apply_gain(
     K: F64,
     dx: F64,
     last_considered: int,
+    rot_est: bool,
 ) -> None:
     # the states from E_LANE up to last_considered (the lane-offset and map-bias errors, but
     # for the map bias where a route pseudo-position estimates it) are considered, not
-    # estimated (Schmidt): their gain is zero, and as the last states the symmetric update
-    # below then leaves their covariance as it was; the map's rotation error E_ROT is always
-    # considered
+    # estimated (Schmidt): their gain is zero, and the symmetric update below then leaves
+    # their covariance as it was; the map's rotation error E_ROT is considered unless
+    # rot_est (a route pseudo-position with extensions.map_turn_estimate)
     for i in range(NE):
         for a in range(m):
             acc = 0.0
             for b in range(m):
                 acc += PHt[i, b] * Si[b, a]
             K[i, a] = acc  # K = P H^T S^-1
-    for i in range(E_LANE, last_considered):
-        for a in range(m):
-            K[i, a] = 0.0
-    for a in range(m):
-        K[E_ROT, a] = 0.0
     for i in range(NE):
-        considered = E_LANE <= i < last_considered or i == E_ROT
+        if (E_LANE <= i < last_considered or i == E_ROT) and not (i == E_ROT and rot_est):
+            for a in range(m):
+                K[i, a] = 0.0
+    for i in range(NE):
+        considered = (E_LANE <= i < last_considered or i == E_ROT) and not (i == E_ROT and rot_est)
         for j in range(i, NE):
             acc = 0.0
             for a in range(m):
@@ -345,10 +348,19 @@ def pseudo_position_update(
     K = np.empty((NE, 3))
     dx = np.empty(NE)
     estimate = cfg[C_ROUTE_EST] > 0 and aux[A_ROUTE_EST] > 0
-    _apply_gain(x, P, y, 2, PHt, Si, cfg[C_SCALE_ON] > 0, K, dx, E_LANE if estimate else NE)
+    rot_est = aux[A_ROT_EST] > 0
+    last = E_LANE if estimate else NE
+    _apply_gain(x, P, y, 2, PHt, Si, cfg[C_SCALE_ON] > 0, K, dx, last, rot_est)
     if estimate:
         for k in range(3):
             aux[A_ROUTE + k] += dx[E_LANE + k]
+    if rot_est:
+        # E_MAP is the map's error at A_MAP_AT: a rotation correction dr there moves the map
+        # by dr J (q - a), i.e. turns it by dr about the origin and shifts it by -dr J a
+        dr = dx[E_ROT]
+        aux[A_ROT] += dr
+        aux[A_ROT_SHIFT] += dr * aux[A_MAP_AT + 1]
+        aux[A_ROT_SHIFT + 1] -= dr * aux[A_MAP_AT]
     aux[A_INFLATE] = 1.0
     return np.array([y[0], y[1], x[X_POS] - p0, x[X_POS + 1] - p1])
 
@@ -414,14 +426,21 @@ def grow_map_bias(P: F64, var: float) -> None:
 
 
 @kernel
-def clone_map_turn(P: F64, aux: F64, x: F64, var: float) -> None:
+def clone_map_turn(P: F64, aux: F64, x: F64, var: float, estimate: bool) -> None:
     """Start an outage's map-rotation error (``E_ROT``, rad) with variance ``var``,
     independent of every other state, and make the map-bias error ``E_MAP`` the one at the
-    vehicle's position (:func:`turn_map_bias` carries it along)."""
+    vehicle's position (:func:`turn_map_bias` carries it along). ``estimate``: the outage's
+    pseudo-positions estimate it (``extensions.map_turn_estimate``), accumulated in
+    ``aux[A_ROT]`` and ``aux[A_ROT_SHIFT:]`` (the map turned back by ``A_ROT`` about the
+    origin and shifted back by ``A_ROT_SHIFT``, on top of ``A_ROUTE``'s shift)."""
     for j in range(NE):
         P[E_ROT, j] = 0.0
         P[j, E_ROT] = 0.0
     P[E_ROT, E_ROT] = var
+    aux[A_ROT_EST] = 1.0 if estimate else 0.0
+    aux[A_ROT] = 0.0
+    aux[A_ROT_SHIFT] = 0.0
+    aux[A_ROT_SHIFT + 1] = 0.0
     aux[A_MAP_AT] = x[X_POS]
     aux[A_MAP_AT + 1] = x[X_POS + 1]
 

@@ -94,8 +94,9 @@ class MapBias:
     """the track fixed the along-track bias to better than half its prior"""
     turn_var: float = 0.0
     """variance of the map's rotation error, rad^2: the applied rotation's, or the second
-    moment of one fitted but not applied (its square less its own variance); the outage's
-    pseudo-positions carry it as a considered state (``extensions.map_turn_consider``)"""
+    moment of one fitted but not applied (its square less its own variance; plus it where the
+    bias is applied and ``offset.map_turn_honest_prior``); the outage's pseudo-positions carry
+    it as a considered state (``extensions.map_turn_consider``) or estimate it"""
     refused: MapBiasRefusal | None = None
     """why ``measured`` was not applied whatever its significance: too large for a map's
     error, or with a lane too far from the route (another road); None otherwise"""
@@ -117,6 +118,19 @@ def xy_moved_back(xy: F64, offset: F64, rotation: float, pivot: F64) -> F64:
     d = xy - pivot
     out: F64 = xy - offset - rotation * np.column_stack([-d[:, 1], d[:, 0]])
     return out
+
+
+def turned_back(
+    offset: F64, rotation: float, pivot: F64, *, turn: float, shift: F64
+) -> tuple[F64, float]:
+    """The bias ``offset`` at ``pivot`` and ``rotation`` about it after an outage's matches
+    turned the map back by ``turn`` about the origin and shifted it by ``shift``
+    (``extensions.map_turn_estimate``): each correction ``dr`` of the rotation error at the
+    vehicle's position ``a`` moves the map by ``dr J (q - a)``, which the filter sums as a turn
+    about the origin and a shift ``-dr J a``; as a shift at the pivot and a turn about it, the
+    same field is ``offset + shift + turn J pivot`` and ``rotation + turn``."""
+    moved: F64 = offset + shift + turn * np.array([-pivot[1], pivot[0]])
+    return moved, rotation + turn
 
 
 def _result(
@@ -391,10 +405,16 @@ def learn_map_bias(
     rotated = u[3] ** 2 / total[3, 3] >= op.map_bias_min_sigmas**2
     full = (u, C, G, total)
     turn_var = float(C[3, 3])
+    honest_turn_var = turn_var
     if not rotated:
         # a rotation not applied leaves the map turned by what the fit saw, less what its own
         # noise explains (a right map within its noise gains nothing)
         turn_var = max(float(u[3] ** 2 - total[3, 3]), 0.0)
+        honest_turn_var = turn_var
+        if params.extensions.map_turn_estimate and op.map_turn_honest_prior:
+            # with the bias applied the outage's matches estimate the rotation error, which can
+            # then start from its honest second moment (taking it as zero given N(u3, total33))
+            honest_turn_var = float(u[3] ** 2 + total[3, 3])
         # a rotation no test tells from zero is not applied, nor does its sigma, extrapolated
         # from the approach into a long tunnel, swamp the bias learned at the portal
         u3, C3, G3 = _solve(A[:, :3], d, weights, P0[:3, :3], nrm, mean[:3])
@@ -416,6 +436,7 @@ def learn_map_bias(
             u, C, G, total = full
             rotated = True
             turn_var = float(C[3, 3])
+            honest_turn_var = turn_var
     b, Cb = u[1:3], total[1:3, 1:3]
     chi2 = float(b @ np.linalg.solve(Cb, b))
     t_end = np.array([normal_end[1], -normal_end[0]])
@@ -458,7 +479,7 @@ def learn_map_bias(
         measured_cov=Cb,
         chi2=chi2,
         along_observed=along_observed,
-        turn_var=turn_var,
+        turn_var=honest_turn_var,
     )
 
 

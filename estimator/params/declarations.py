@@ -390,6 +390,15 @@ class OffsetParams:
         "with that rotation and its sigma (a map drawn turned about a point far into a long "
         "tunnel is metres off at the portal)",
     )
+    map_turn_honest_prior: bool = param(
+        False,
+        "with extensions.map_turn_estimate, an applied bias whose fitted rotation is not "
+        "applied starts the outage's rotation error from its honest second moment (the "
+        "rotation's square plus its variance) instead of the method of moments (its square "
+        "less its variance, often zero): the matches cannot tell the map's rotation from the "
+        "dead-reckoned heading's drift, so on a right map they then turn the map instead of "
+        "the heading",
+    )
     map_bias_max_residual_m: float = param(
         3.0,
         "a GNSS track fitting the route worse than this (RMS) teaches no bias (another road)",
@@ -524,6 +533,14 @@ class ExtensionParams:
         "was learned as one quantity shared by all of the outage's matches, beside the random "
         "walk (which repeated matches average away while they turn the heading to the map's, "
         "but which lets them re-estimate an applied bias where the road turns)",
+    )
+    map_turn_estimate: bool = param(
+        False,
+        "estimate the map's rotation error in the outage instead of only considering it, "
+        "where the outage's pseudo-positions estimate the map's bias (an applied bias), match "
+        "to the route turned back by what they learned and carry it to the next outage; where "
+        "the bias is not applied it stays considered (the matches cannot tell the map's "
+        "rotation from the heading's drift, which on a right map they would take for it)",
     )
 
 

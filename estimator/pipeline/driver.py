@@ -35,12 +35,15 @@ from estimator.filter.kernel import finite_state
 from estimator.filter.layout import (
     A_DIST,
     A_DR,
-    A_MAP_AT,
     A_NEXT_OUT,
+    A_ROT,
+    A_ROT_EST,
+    A_ROT_SHIFT,
     A_ROUTE,
     A_TIME,
     A_USED_DIST,
     C_OUT_DT,
+    C_ROUTE_EST,
     E_MAP,
     E_POS,
     E_VEL,
@@ -82,7 +85,9 @@ from estimator.matching.map_bias import (
     learn_map_bias,
     prior_bias,
     refined_bias,
+    turned_back,
     unbiased,
+    xy_moved_back,
 )
 from estimator.matching.reanchor import should_reanchor, within_drift
 from estimator.nav.frames import LocalFrame
@@ -245,8 +250,8 @@ class _Track:
     """the map bias of the current interval (``extensions.map_bias``)"""
     biased_route: Route | None = None
     """the route moved back by ``bias``: where the road driven is"""
-    biased_key: tuple[float, float] = (0.0, 0.0)
-    """the offset ``biased_route`` was moved back by"""
+    biased_key: tuple[float, float, float] = (0.0, 0.0, 0.0)
+    """the offset and rotation ``biased_route`` was moved back by"""
     pivot_dist: float = 0.0
     """distance travelled at the end of the track the bias was learned from"""
 
@@ -334,9 +339,12 @@ class Driver:
                 elif self.p.extensions.lane_offset_state and self.track.s is not None:
                     t = self.route.tangent_at(self.track.s)[0]
                     clone_lane_offset(f.P, f.aux, self.inp.cfg, np.array([-t[1], t[0]]))
-                turn = self.p.extensions.map_turn_consider
-                clone_map_turn(f.P, f.aux, f.x, bias.turn_var if bias is not None and turn else 0.0)
-                if self.p.extensions.dr_separation:
+                ext = self.p.extensions
+                turn = ext.map_turn_consider
+                estimate = turn and ext.map_turn_estimate and self._turn_estimated(bias)
+                var = bias.turn_var if bias is not None and turn else 0.0
+                clone_map_turn(f.P, f.aux, f.x, var, estimate)
+                if ext.dr_separation:
                     self.twin = DeadReckoningTwin(f.snapshot(), self.inp)
             while True:
                 t_try = a + tr.min_outage_s + k * tr.interval_s
@@ -426,7 +434,8 @@ class Driver:
         tr.t_start = t_a
         previous = None
         if tr.bias is not None and np.isfinite(tr.bias.chi2):
-            previous = (tr.bias, self._route_estimate(aux)[0], tr.pivot_dist)
+            turned = dataclasses.replace(tr.bias, rotation=self._route_turn(aux))
+            previous = (turned, self._route_estimate(aux)[0], tr.pivot_dist)
         tr.bias, tr.biased_route = None, None
         if self.p.extensions.map_bias:
             track = self._bias_track(rows, last)
@@ -602,7 +611,7 @@ class Driver:
                 bias.along_observed,
                 learned=bias.measured,
                 chi2=bias.chi2,
-                rotation_rad=bias.rotation,
+                rotation_rad=self._route_turn(aux),
                 rotation_sigma_rad=bias.rotation_sigma,
                 applied=bias.significant,
                 refused=bias.refused,
@@ -660,10 +669,11 @@ class Driver:
         bias_key: tuple[float, ...] = ()
         if tr.bias is not None:
             offset, lane = self._route_estimate(aux)
-            key = (float(offset[0]), float(offset[1]))
+            turn = self._route_turn(aux)
+            key = (float(offset[0]), float(offset[1]), turn)
             if tr.biased_route is None or tr.biased_key != key:
                 tr.biased_route = Route(
-                    tr.bias.moved_back(self.route.xy, offset),
+                    xy_moved_back(self.route.xy, offset, turn, tr.bias.pivot),
                     name=self.route.name,
                     source=self.route.source,
                 )
@@ -691,7 +701,24 @@ class Driver:
         bias = self.track.bias
         assert bias is not None
         offset: F64 = bias.offset + aux[A_ROUTE + 1 : A_ROUTE + 3]
+        if aux[A_ROT_EST] > 0:
+            shift = aux[A_ROT_SHIFT : A_ROT_SHIFT + 2]
+            offset = turned_back(
+                offset, bias.rotation, bias.pivot, turn=float(aux[A_ROT]), shift=shift
+            )[0]
         return offset, bias.lane + float(aux[A_ROUTE])
+
+    def _route_turn(self, aux: F64) -> float:
+        """The map's rotation about the bias's pivot: as learned before the outage plus what
+        its matches estimated of its error since (``extensions.map_turn_estimate``)."""
+        bias = self.track.bias
+        assert bias is not None
+        return bias.rotation + (float(aux[A_ROT]) if aux[A_ROT_EST] > 0 else 0.0)
+
+    def _turn_estimated(self, bias: MapBias | None) -> bool:
+        """The outage's pseudo-positions estimate the map's rotation error: where they
+        estimate its bias (an applied bias)."""
+        return bias is not None and bias.significant and self.inp.cfg[C_ROUTE_EST] > 0
 
     def after_match(self, rec: MatchRecord, x_after: F64, aux: F64) -> None:
         """Follow the vehicle along the route after an accepted match."""
@@ -750,8 +777,9 @@ class Driver:
         twin.undone = Undone(rec.t, sep)
         f.x[:] = twin.x
         f.P[:] = twin.P
-        f.aux[A_ROUTE : A_ROUTE + 3] = twin.aux[A_ROUTE : A_ROUTE + 3]
-        f.aux[A_MAP_AT : A_MAP_AT + 2] = twin.aux[A_MAP_AT : A_MAP_AT + 2]
+        # what the outage's matches estimated of the route's errors, and where, goes back too
+        estimated = slice(A_ROUTE, A_ROT_SHIFT + 2)
+        f.aux[estimated] = twin.aux[estimated]
         extra = {**rec.extra, "dr_separation_m": sep.metres}
         return dataclasses.replace(rec, accepted=False, extra=extra)
 

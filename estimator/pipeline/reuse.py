@@ -189,6 +189,7 @@ def resume(d: Driver, old: ReuseState, old_params: Params, *, reuse_matching: bo
         and p.extensions.map_bias == old_params.extensions.map_bias
         and p.extensions.unapplied_bias_consider == old_params.extensions.unapplied_bias_consider
         and p.extensions.map_turn_consider == old_params.extensions.map_turn_consider
+        and p.extensions.map_turn_estimate == old_params.extensions.map_turn_estimate
         and p.extensions.reanchor == old_params.extensions.reanchor
         and p.extensions.dr_separation == old_params.extensions.dr_separation
         and (

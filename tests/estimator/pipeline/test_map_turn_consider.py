@@ -23,7 +23,7 @@ def test_turning_the_map_error_is_t_p_t_transposed() -> None:
     aux = np.zeros(NA)
     x = np.zeros(20)
     x[X_POS : X_POS + 2] = [100.0, -50.0]
-    clone_map_turn(P, aux, x, 1e-6)
+    clone_map_turn(P, aux, x, 1e-6, False)
     assert P[E_ROT, E_ROT] == 1e-6 and not np.any(P[E_ROT, :E_ROT])
     want = P.copy()
     x[X_POS : X_POS + 2] = [400.0, 350.0]
