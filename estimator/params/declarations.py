@@ -535,7 +535,7 @@ class ExtensionParams:
         "but which lets them re-estimate an applied bias where the road turns)",
     )
     map_turn_estimate: bool = param(
-        False,
+        True,
         "estimate the map's rotation error in the outage instead of only considering it, "
         "where the outage's pseudo-positions estimate the map's bias (an applied bias), match "
         "to the route turned back by what they learned and carry it to the next outage; where "
