@@ -15,7 +15,7 @@ from __future__ import annotations
 import dataclasses
 import math
 from dataclasses import dataclass
-from typing import Literal
+from typing import Any, Literal
 
 import numpy as np
 
@@ -24,7 +24,7 @@ from estimator.nav.frames import LocalFrame
 from estimator.pipeline.inputs import Inputs
 from estimator.route import Route
 from estimator.sim.scenarios import get_scenario
-from estimator.sim.simulation import simulate
+from estimator.sim.simulation import Progress, simulate
 
 Fault = Literal[
     "map_bias", "no_odometer", "bad_first_fix", "imu_gap", "parallel_road", "reversed_route"
@@ -65,6 +65,11 @@ class DriveSpec:
     imu_gap_s: float
 
     @property
+    def name(self) -> str:
+        """the drive's file name (``routefuse simulate --stress N`` writes ``stress_N.*``)"""
+        return f"stress_{self.index}"
+
+    @property
     def route_is_right(self) -> bool:
         """The route is the road driven (up to its map bias), not a trap."""
         return self.fault not in ("parallel_road", "reversed_route")
@@ -99,8 +104,22 @@ class Drive:
     tunnels: tuple[tuple[float, float], ...]
     """GNSS outages of the drive, log time"""
 
+    def route_geojson(self) -> dict[str, Any]:
+        """The drive's route file (biased or a trap, as drawn), its spec in the properties;
+        ``routefuse simulate --stress N`` writes it beside the log."""
+        route = self.inputs.route
+        assert route is not None
+        doc = get_scenario(self.spec.base).route_geojson(
+            route.xy,
+            self.inputs.frame,
+            name=f"{self.spec.name} route",
+            derived_from=f"routefuse simulate --stress {self.spec.index}",
+        )
+        doc["features"][0]["properties"]["stress_drive"] = dataclasses.asdict(self.spec)
+        return doc
 
-def build(spec: DriveSpec) -> Drive:
+
+def build(spec: DriveSpec, *, progress: Progress | None = None) -> Drive:
     """The drive of ``spec``: simulated, then its faults applied to the log and the route."""
     sc = get_scenario(spec.base)
     sc = dataclasses.replace(
@@ -108,7 +127,7 @@ def build(spec: DriveSpec) -> Drive:
         imu=dataclasses.replace(sc.imu, gyro_turn_on_bias_deg_h=spec.gyro_bias_deg_h),
         wheel=dataclasses.replace(sc.wheel, scale_error=spec.wheel_scale_error),
     )
-    sim = simulate(sc, seed=spec.seed)
+    sim = simulate(sc, seed=spec.seed, progress=progress)
     road = sim.route()
     log = sim.log()
     if spec.fault == "no_odometer":
