@@ -6,8 +6,9 @@ parallel-road and reversed-route traps.
 Every drive is a pure function of its index (:func:`drive_spec`, then :func:`build`): the same
 index gives bit for bit the same log and route, so a figure measured on the corpus can be
 reproduced and a drive that fails can be opened on its own. Drives are built in memory (a
-:class:`~estimator.pipeline.inputs.Inputs`); ``routefuse simulate`` writes bags when a file is
-wanted.
+:class:`~estimator.pipeline.inputs.Inputs`); ``routefuse simulate --stress N --out DIR`` writes
+drive N as ``DIR/stress_N.mcap`` and ``DIR/stress_N.route.geojson`` (:meth:`Drive.route_geojson`,
+through :func:`~estimator.sim.simulation.write_drive`) to open it in the inspector.
 """
 
 from __future__ import annotations

@@ -69,8 +69,8 @@ def test_undone_route_updates_on_the_page(browser, tmp_path):
         text = page.inner_text("body")
         assert re.search(r"dr_separation\s+[\d.]+\s+<= 13\.800\s+✗ FAILED", text), text[:3000]
         assert "REJECTED by dr_separation" in text and UNDONE_HERE in text
-        assert view.layers.layers["match"]._handles["label"].text.endswith(
-            "rejected: dr_separation"
+        assert (
+            view.layers.layers["match"]._handles["label"].text.endswith("rejected: dr_separation")
         )
         page.get_by_text("Legend").first.click()  # folded: the gate table shows below
         close = page.locator(".mantine-Notification-closeButton")
