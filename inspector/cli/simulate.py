@@ -139,8 +139,8 @@ def execute(args: argparse.Namespace) -> int:
     bag, route = sim.write(args.out, storage=args.storage, overwrite=args.force)
     progress("writing", 1.0)
     progress.done()
-    about = f"{sim.duration_s:.1f} s, {sim.distance_m / 1000:.2f} km, IMU at {sim.imu_rate_hz:g} Hz"
-    _report(bag, route, sim.log(), sim.route(), sim.tunnels, about)
+    about = f"{sim.duration_s:.1f} s, {sim.distance_m / 1000:.2f} km"
+    _report(bag, route, sim.log(), sim.route(), sim.tunnels, about, imu_rate_hz=sim.imu_rate_hz)
     print(f"done in {time.perf_counter() - started:.1f} s")
     return 0
 
@@ -202,14 +202,17 @@ def _report(
     route: Route,
     tunnels: tuple[tuple[float, float], ...],
     about: str,
+    *,
+    imu_rate_hz: float | None = None,
 ) -> None:
     """What was written: the bag's streams and tunnels (seconds from the start), the route."""
     t0 = log.t_start
     spans = ", ".join(f"{a - t0:.1f}-{b - t0:.1f} s" for a, b in tunnels)
     wheel = "none" if log.wheel is None else str(len(log.wheel.t))
     truth = "none" if log.truth is None else str(len(log.truth.t))
+    rate = "" if imu_rate_hz is None else f" at {imu_rate_hz:g} Hz"
     print(
-        f"{bag}: {about}, IMU {len(log.imu.t)}, GNSS {len(log.gnss.t)} "
+        f"{bag}: {about}, IMU {len(log.imu.t)}{rate}, GNSS {len(log.gnss.t)} "
         f"({int(log.gnss.valid.sum())} fixes), wheel {wheel}, truth {truth}; "
         f"tunnels {spans or 'none'}"
     )
