@@ -3,12 +3,14 @@
 from __future__ import annotations
 
 from dataclasses import dataclass, field, replace
-from typing import Literal
+from typing import Any, Literal
 
 import numpy as np
+from numpy.typing import ArrayLike
 
+from estimator.nav.frames import LocalFrame
 from estimator.sim.road import Piece, Road, scale_pieces
-from estimator.sim.sdmap import RouteModel
+from estimator.sim.sdmap import RouteModel, route_geojson
 from estimator.sim.sensors import GnssErrorModel, ImuErrorModel, WheelErrorModel
 
 GnssOutage = Literal["no_fix", "silent"]
@@ -58,6 +60,22 @@ class Scenario:
         if duration_scale == 1.0:
             return self
         return replace(self, pieces=scale_pieces(self.pieces, duration_scale))
+
+    def route_geojson(
+        self, xy: ArrayLike, frame: LocalFrame, *, name: str, derived_from: str
+    ) -> dict[str, Any]:
+        """The route file of a drive of this scenario (its route model, lane and attribution
+        in the properties): the simulated route, or a stress drive's biased one."""
+        return route_geojson(
+            xy,
+            frame,
+            name=name,
+            source=self.source,
+            derived_from=derived_from,
+            model=self.route,
+            lateral_offset_m=-self.lane_offset_m,
+            attribution=self.attribution,
+        )
 
     def with_perfect_sensors(self) -> Scenario:
         """Ideal IMU and wheel speed, exact GNSS in open sky (tunnels still block it)."""

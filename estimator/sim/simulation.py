@@ -17,7 +17,7 @@ from estimator.nav.frames import LocalFrame
 from estimator.route import Route
 from estimator.sim.road import Road
 from estimator.sim.scenario import Scenario
-from estimator.sim.sdmap import map_route, route_geojson, write_geojson
+from estimator.sim.sdmap import map_route, write_geojson
 from estimator.sim.sensors import ImuErrors, apply_imu_errors, apply_wheel_errors, gnss_errors
 from estimator.sim.trajectory import Kinematics, Trajectory
 
@@ -25,6 +25,8 @@ F64 = NDArray[np.float64]
 Progress = Callable[[str, float], None]
 
 _CHUNK = 100_000
+BAG_SUFFIX = {"mcap": ".mcap", "sqlite3": "", "ros1": ".bag"}
+"""file name suffix of a bag per storage (a sqlite3 bag is a folder)"""
 
 
 @dataclass(frozen=True)
@@ -89,15 +91,11 @@ class Simulation:
 
     def route_geojson(self) -> dict[str, Any]:
         sc = self.scenario
-        return route_geojson(
+        return sc.route_geojson(
             self.route_xy,
             self.frame,
             name=f"{sc.name} route",
-            source=sc.source,
             derived_from=f"routefuse simulate {sc.name} --seed {self.seed}",
-            model=sc.route,
-            lateral_offset_m=-sc.lane_offset_m,
-            attribution=sc.attribution,
         )
 
     def write(
@@ -109,30 +107,44 @@ class Simulation:
     ) -> tuple[Path, Path]:
         """Write the bag (``<name>.mcap``, a ``<name>/`` sqlite3 bag folder or ``<name>.bag``)
         and ``<name>.route.geojson`` into ``out_dir``; returns both paths."""
-        from estimator.io.bagwrite import write_bag
-
-        out = Path(out_dir)
-        out.mkdir(parents=True, exist_ok=True)
-        suffix = {"mcap": ".mcap", "sqlite3": "", "ros1": ".bag"}[storage]
-        bag = out / f"{self.scenario.name}{suffix}"
-        route = out / f"{self.scenario.name}.route.geojson"
-        if bag.exists():
-            if not overwrite:
-                raise ConfigError(bag, "already exists (pass overwrite to replace it)")
-            if bag.is_dir():
-                shutil.rmtree(bag)
-            else:
-                bag.unlink()
-        write_bag(
-            bag,
-            imu=self.imu,
-            gnss=self.gnss,
-            wheel=self.wheel,
-            truth=self.truth_fix,
+        return write_drive(
+            out_dir,
+            self.scenario.name,
+            self.log(),
+            self.route_geojson(),
             storage=storage,
+            overwrite=overwrite,
         )
-        write_geojson(route, self.route_geojson())
-        return bag, route
+
+
+def write_drive(
+    out_dir: str | Path,
+    name: str,
+    log: Log,
+    route_doc: dict[str, Any],
+    *,
+    storage: Literal["mcap", "sqlite3", "ros1"] = "mcap",
+    overwrite: bool = False,
+) -> tuple[Path, Path]:
+    """Write ``log``'s streams as a bag named ``name`` and ``route_doc`` as
+    ``<name>.route.geojson`` into ``out_dir`` (a simulated scenario or a stress-corpus drive:
+    one writer, so both open the same way); returns both paths."""
+    from estimator.io.bagwrite import write_bag
+
+    out = Path(out_dir)
+    out.mkdir(parents=True, exist_ok=True)
+    bag = out / f"{name}{BAG_SUFFIX[storage]}"
+    route = out / f"{name}.route.geojson"
+    if bag.exists():
+        if not overwrite:
+            raise ConfigError(bag, "already exists (pass overwrite to replace it)")
+        if bag.is_dir():
+            shutil.rmtree(bag)
+        else:
+            bag.unlink()
+    write_bag(bag, imu=log.imu, gnss=log.gnss, wheel=log.wheel, truth=log.truth, storage=storage)
+    write_geojson(route, route_doc)
+    return bag, route
 
 
 def _stamps(t0_ns: int, rate_hz: float, duration_s: float) -> tuple[NDArray[np.int64], F64]:

@@ -6,8 +6,9 @@ parallel-road and reversed-route traps.
 Every drive is a pure function of its index (:func:`drive_spec`, then :func:`build`): the same
 index gives bit for bit the same log and route, so a figure measured on the corpus can be
 reproduced and a drive that fails can be opened on its own. Drives are built in memory (a
-:class:`~estimator.pipeline.inputs.Inputs`); ``routefuse simulate`` writes bags when a file is
-wanted.
+:class:`~estimator.pipeline.inputs.Inputs`); ``routefuse simulate --stress N --out DIR`` writes
+drive N as ``DIR/stress_N.mcap`` and ``DIR/stress_N.route.geojson`` (:meth:`Drive.route_geojson`,
+through :func:`~estimator.sim.simulation.write_drive`) to open it in the inspector.
 """
 
 from __future__ import annotations
@@ -15,7 +16,7 @@ from __future__ import annotations
 import dataclasses
 import math
 from dataclasses import dataclass
-from typing import Literal
+from typing import Any, Literal
 
 import numpy as np
 
@@ -24,7 +25,7 @@ from estimator.nav.frames import LocalFrame
 from estimator.pipeline.inputs import Inputs
 from estimator.route import Route
 from estimator.sim.scenarios import get_scenario
-from estimator.sim.simulation import simulate
+from estimator.sim.simulation import Progress, simulate
 
 Fault = Literal[
     "map_bias", "no_odometer", "bad_first_fix", "imu_gap", "parallel_road", "reversed_route"
@@ -65,6 +66,11 @@ class DriveSpec:
     imu_gap_s: float
 
     @property
+    def name(self) -> str:
+        """the drive's file name (``routefuse simulate --stress N`` writes ``stress_N.*``)"""
+        return f"stress_{self.index}"
+
+    @property
     def route_is_right(self) -> bool:
         """The route is the road driven (up to its map bias), not a trap."""
         return self.fault not in ("parallel_road", "reversed_route")
@@ -99,8 +105,22 @@ class Drive:
     tunnels: tuple[tuple[float, float], ...]
     """GNSS outages of the drive, log time"""
 
+    def route_geojson(self) -> dict[str, Any]:
+        """The drive's route file (biased or a trap, as drawn), its spec in the properties;
+        ``routefuse simulate --stress N`` writes it beside the log."""
+        route = self.inputs.route
+        assert route is not None
+        doc = get_scenario(self.spec.base).route_geojson(
+            route.xy,
+            self.inputs.frame,
+            name=f"{self.spec.name} route",
+            derived_from=f"routefuse simulate --stress {self.spec.index}",
+        )
+        doc["features"][0]["properties"]["stress_drive"] = dataclasses.asdict(self.spec)
+        return doc
 
-def build(spec: DriveSpec) -> Drive:
+
+def build(spec: DriveSpec, *, progress: Progress | None = None) -> Drive:
     """The drive of ``spec``: simulated, then its faults applied to the log and the route."""
     sc = get_scenario(spec.base)
     sc = dataclasses.replace(
@@ -108,7 +128,7 @@ def build(spec: DriveSpec) -> Drive:
         imu=dataclasses.replace(sc.imu, gyro_turn_on_bias_deg_h=spec.gyro_bias_deg_h),
         wheel=dataclasses.replace(sc.wheel, scale_error=spec.wheel_scale_error),
     )
-    sim = simulate(sc, seed=spec.seed)
+    sim = simulate(sc, seed=spec.seed, progress=progress)
     road = sim.route()
     log = sim.log()
     if spec.fault == "no_odometer":

@@ -7,8 +7,16 @@ from typing import Any
 import numpy as np
 import viser
 
-from estimator.results import GateDecision, MatchRecord
+from estimator.matching.gates import DR_SEPARATION
+from estimator.results import Gate, GateDecision, MatchRecord
 from inspector.controller import Session
+
+UNDONE_HERE = (
+    "This update moved the position too far from dead reckoning: the outage's route updates, "
+    "this one included, were undone and the rest of the outage is dead-reckoned."
+)
+"""the line under the head of the attempt whose dr_separation gate undid the route updates
+(a REJECTED whose other gates all passed reads as a contradiction without it)"""
 
 
 def _fmt(v: Any, digits: int = 3) -> str:
@@ -38,12 +46,18 @@ def match_markdown(
     """The match panel: every gate with value, threshold and verdict, then the fit."""
     if m is None:
         return "*No match attempt before this time.*"
+    failed = [g for g in m.gates if not g.passed]
     head = "ACCEPTED" if m.accepted else "REJECTED"
+    if failed and not m.accepted:
+        head += " by " + ", ".join(g.name for g in failed)
     when = f" at t = {t_rel:.2f} s" if t_rel is not None else ""
     age = f" ({age_s:.2f} s ago)" if age_s > 0.005 else ""
-    lines = [
-        f"**Attempt #{m.index} of {total}{when}{age}: {head}**",
-        "",
+    lines = [f"**Attempt #{m.index} of {total}{when}{age}: {head}**", ""]
+    undone = next((g for g in failed if g.gate is Gate.DR_SEPARATION), None)
+    if undone is not None:
+        here = undone.note == DR_SEPARATION.note  # a later attempt's note says when it was
+        lines += [f"*{UNDONE_HERE if here else undone.note}*", ""]
+    lines += [
         "| gate | value | limit | verdict |",
         "|---|---:|---:|---|",
     ]

@@ -74,8 +74,9 @@ def warnings_markdown(warnings: tuple[str, ...]) -> str:
     lines = [f"- {markdown_text(w[:MAX_WARNING_CHARS])}" for w in unique[:MAX_WARNINGS_SHOWN]]
     if len(unique) > MAX_WARNINGS_SHOWN:
         lines.append(f"- and {len(unique) - MAX_WARNINGS_SHOWN} more (`routefuse info` lists all)")
-    head = f"\n\n⚠ **{len(unique)} warning{'s' if len(unique) > 1 else ''} about this log**"
-    return head + " (repaired or looking wrong):\n\n" + "\n".join(lines)
+    plural = "s" if len(unique) > 1 else ""
+    head = f"\n\n⚠ **{len(unique)} warning{plural} about this log and its run**"
+    return head + " (what was repaired, looks wrong or was undone):\n\n" + "\n".join(lines)
 
 
 def _report_failure(done: Future[None]) -> None:

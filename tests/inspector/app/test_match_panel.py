@@ -26,3 +26,26 @@ def test_match_panel_for_an_accepted_attempt_and_for_none():
     assert "ACCEPTED" in text and "(1.50 s ago)" in text and "FAILED" not in text
     assert "| correction E, N | (0.00, -2.00) m" in text
     assert "No match attempt" in match_markdown(None)
+
+
+def test_match_panel_says_why_route_updates_were_undone():
+    """An attempt whose dr_separation gate failed passed every other gate: the head names the
+    failed gate and the line under it says the outage's route updates were undone."""
+    import dataclasses
+
+    from estimator.matching.gates import DR_SEPARATION
+    from estimator.results import Gate, GateDecision
+    from inspector.app.match import UNDONE_HERE
+
+    m = make_run(rejected=()).matches[1]
+    failed = GateDecision(Gate.DR_SEPARATION, 14.4, 13.8, "<=", False, DR_SEPARATION.note)
+    undone = dataclasses.replace(m, accepted=False, gates=(*m.gates, failed))
+    text = match_markdown(undone, t_rel=50.0, total=5)
+    assert "Attempt #1 of 5 at t = 50.00 s: REJECTED by dr_separation**" in text
+    assert UNDONE_HERE in text
+    note = "the outage's route updates were undone at 45.0 s: none taken since"
+    later = dataclasses.replace(undone, gates=(*m.gates, dataclasses.replace(failed, note=note)))
+    text = match_markdown(later, t_rel=60.0, total=5)
+    assert f"*{note}*" in text.splitlines()[2] and UNDONE_HERE not in text
+    rejected = make_run(rejected=(2,)).matches[2]
+    assert ": REJECTED by residual**" in match_markdown(rejected, total=5)

@@ -55,3 +55,70 @@ def test_imu_rate_and_perfect(tmp_path) -> None:
     assert main([*argv, "--imu-rate", "200", "--perfect"]) == 0
     log = load_log(tmp_path / "short_tunnel.mcap", cache_dir=tmp_path / "cache")
     assert len(log.imu.t) == 1001
+
+
+def _truth_rmse(inputs) -> tuple[float, tuple[str, ...], list[bool]]:
+    from estimator.evaluation.metrics import method_metrics
+    from estimator.params import Params
+    from estimator.pipeline import run_methods
+
+    run = run_methods(inputs, Params(), methods=("proposed",))["proposed"]
+    truth = method_metrics(run, inputs.route, inputs.log).truth
+    assert truth is not None and truth.rmse_h_err_m is not None
+    return truth.rmse_h_err_m, run.warnings, [m.accepted for m in run.matches]
+
+
+def test_stress_drive_reads_back_as_the_corpus_builds_it(tmp_path, capsys) -> None:
+    """``--stress 5`` writes the corpus drive (its spiral tunnel trips dr_separation): the bag
+    holds the in-memory log's streams bit for bit and runs the same. Not bit for bit in the
+    run: a bag's frame sits at its first fix (the simulation's at the scenario's origin) and the
+    route file rounds vertices to 1e-8 deg (~1 mm); measured 2e-5 m on this drive."""
+    import numpy as np
+
+    from estimator.pipeline.inputs import open_inputs
+    from estimator.sim.stress import build, drive_spec
+
+    assert main(["simulate", "--stress", "5", "--out", str(tmp_path)]) == 0
+    out = capsys.readouterr().out
+    spec = drive_spec(5)
+    assert f"faults: {spec.fault}; map bias {spec.bias_along_m:+.2f} m along" in out
+    assert f"wheel scale error {100 * spec.wheel_scale_error:+.2f} %" in out
+    bag, route = tmp_path / "stress_5.mcap", tmp_path / "stress_5.route.geojson"
+    props = json.loads(route.read_text())["features"][0]["properties"]
+    assert props["stress_drive"]["fault"] == spec.fault
+    drive = build(spec)
+    disk = open_inputs(bag, route, cache_dir=tmp_path / "cache")
+    for stream in ("imu", "gnss", "wheel"):
+        a, b = getattr(drive.inputs.log, stream), getattr(disk.log, stream)
+        for name, value in vars(a).items():
+            if isinstance(value, np.ndarray):
+                assert np.array_equal(value, getattr(b, name), equal_nan=True), (stream, name)
+    assert np.array_equal(drive.inputs.log.truth.lat, disk.log.truth.lat)
+    memory_rmse, memory_warnings, memory_accepted = _truth_rmse(drive.inputs)
+    disk_rmse, disk_warnings, disk_accepted = _truth_rmse(disk)  # the chi-square in the
+    # warning may differ in its last digit shown
+    assert abs(disk_rmse - memory_rmse) < 1e-3
+    assert disk_accepted == memory_accepted
+    assert [w.split(":")[0] for w in disk_warnings] == [w.split(":")[0] for w in memory_warnings]
+    assert any(w.startswith("route updates undone at") for w in disk_warnings)
+
+
+def test_stress_without_odometer_and_errors(tmp_path, capsys) -> None:
+    from estimator.sim.stress import drive_spec
+
+    assert drive_spec(2).fault == "no_odometer"
+    assert main(["simulate", "--stress", "2", "--out", str(tmp_path)]) == 0
+    assert "wheel none" in capsys.readouterr().out
+    log = load_log(tmp_path / "stress_2.mcap", cache_dir=tmp_path / "cache")
+    assert log.wheel is None and log.truth is not None
+    for argv, message in (
+        (["--stress", "2"], "already exists (use --force"),
+        (["short_tunnel", "--stress", "2"], "give a SCENARIO or --stress N, not both"),
+        (["--stress", "-1"], "--stress: -1 is not a corpus index"),
+        (["--stress", "2", "--seed", "4"], "--seed: does not apply to --stress"),
+        (["--stress", "2", "--perfect"], "--perfect: does not apply to --stress"),
+    ):
+        assert main(["simulate", *argv, "--out", str(tmp_path)]) == 2
+        err = capsys.readouterr().err.strip()
+        assert message in err and "\n" not in err, err
+    assert main(["simulate", "--stress", "2", "--out", str(tmp_path), "--force"]) == 0
