@@ -162,7 +162,6 @@ class Filter:
             if target >= t_stop or self.idx[I_IMU] >= len(inp.imu_t):
                 return
 
-
     def _realign(self, r: Realignment) -> None:
         """Replace the navigation state carried across an IMU gap by the fresh alignment after
         it: attitude, velocity and position with their covariance, uncorrelated with the rest
