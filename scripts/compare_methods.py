@@ -91,10 +91,10 @@ BIASED_RUNS = {
     "routefuse": ("proposed", {}),
     "routefuse, `map_bias` off": ("proposed", {"extensions.map_bias": False}),
     "routefuse, `offset.map_bias_refine` off": ("proposed", {"offset.map_bias_refine": False}),
-    "routefuse + `map_turn_estimate`": ("proposed", {"extensions.map_turn_estimate": True}),
-    "routefuse + `map_turn_estimate`, `offset.map_turn_honest_prior`": (
+    "routefuse, `map_turn_estimate` off": ("proposed", {"extensions.map_turn_estimate": False}),
+    "routefuse + `offset.map_turn_honest_prior`": (
         "proposed",
-        {"extensions.map_turn_estimate": True, "offset.map_turn_honest_prior": True},
+        {"offset.map_turn_honest_prior": True},
     ),
     "routefuse + `reanchor`": ("proposed", {"extensions.reanchor": True}),
     "routefuse + `reanchor`, `map_bias` off": (
