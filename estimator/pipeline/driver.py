@@ -718,10 +718,14 @@ class Driver:
 
     def _turn_estimated(self, bias: MapBias | None, var: float) -> bool:
         """The outage's pseudo-positions estimate the map's rotation error (prior variance
-        ``var``): where they estimate its bias (an applied bias) and the prior stands out
-        against the heading's (``offset.map_turn_min_heading_ratio``)."""
+        ``var``): where they estimate its bias (an applied bias), and, for a rotation fitted
+        but not applied (a method-of-moments prior, as often spurious as not on a right map),
+        where the prior stands out against the heading's (``offset.map_turn_min_heading_ratio``);
+        an applied rotation's prior is the fit's own posterior."""
         if bias is None or not bias.significant or self.inp.cfg[C_ROUTE_EST] <= 0:
             return False
+        if bias.rotation != 0.0:
+            return True
         ratio = self.p.offset.map_turn_min_heading_ratio
         return var >= ratio * ratio * float(self.filt.P[E_ATT + 2, E_ATT + 2])
 
