@@ -96,6 +96,10 @@ BIASED_RUNS = {
         "proposed",
         {"offset.map_turn_honest_prior": True},
     ),
+    "routefuse, `offset.map_turn_min_heading_ratio` 0": (
+        "proposed",
+        {"offset.map_turn_min_heading_ratio": 0.0},
+    ),
     "routefuse + `reanchor`": ("proposed", {"extensions.reanchor": True}),
     "routefuse + `reanchor`, `map_bias` off": (
         "proposed",

@@ -399,6 +399,18 @@ class OffsetParams:
         "dead-reckoned heading's drift, so on a right map they then turn the map instead of "
         "the heading",
     )
+    map_turn_min_heading_ratio: float = param(
+        1.2,
+        "with extensions.map_turn_estimate, a rotation fitted on the approach but not applied "
+        "is estimated in the outage only where its prior sigma (method of moments) is at "
+        "least this many times the filter's heading sigma at the outage start: a map turned "
+        "about the portal and a heading error there move the pseudo-positions alike, so a "
+        "rotation prior no larger than the heading's lets the matches take the heading's "
+        "error for the map's rotation (0: always)",
+        lo=0.0,
+        hi=10.0,
+        step=0.1,
+    )
     map_bias_max_residual_m: float = param(
         3.0,
         "a GNSS track fitting the route worse than this (RMS) teaches no bias (another road)",

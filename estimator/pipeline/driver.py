@@ -44,6 +44,7 @@ from estimator.filter.layout import (
     A_USED_DIST,
     C_OUT_DT,
     C_ROUTE_EST,
+    E_ATT,
     E_MAP,
     E_POS,
     E_VEL,
@@ -341,8 +342,8 @@ class Driver:
                     clone_lane_offset(f.P, f.aux, self.inp.cfg, np.array([-t[1], t[0]]))
                 ext = self.p.extensions
                 turn = ext.map_turn_consider
-                estimate = turn and ext.map_turn_estimate and self._turn_estimated(bias)
                 var = bias.turn_var if bias is not None and turn else 0.0
+                estimate = turn and ext.map_turn_estimate and self._turn_estimated(bias, var)
                 clone_map_turn(f.P, f.aux, f.x, var, estimate)
                 if ext.dr_separation:
                     self.twin = DeadReckoningTwin(f.snapshot(), self.inp)
@@ -715,10 +716,18 @@ class Driver:
         assert bias is not None
         return bias.rotation + (float(aux[A_ROT]) if aux[A_ROT_EST] > 0 else 0.0)
 
-    def _turn_estimated(self, bias: MapBias | None) -> bool:
-        """The outage's pseudo-positions estimate the map's rotation error: where they
-        estimate its bias (an applied bias)."""
-        return bias is not None and bias.significant and self.inp.cfg[C_ROUTE_EST] > 0
+    def _turn_estimated(self, bias: MapBias | None, var: float) -> bool:
+        """The outage's pseudo-positions estimate the map's rotation error (prior variance
+        ``var``): where they estimate its bias (an applied bias), and, for a rotation fitted
+        but not applied (a method-of-moments prior, as often spurious as not on a right map),
+        where the prior stands out against the heading's (``offset.map_turn_min_heading_ratio``);
+        an applied rotation's prior is the fit's own posterior."""
+        if bias is None or not bias.significant or self.inp.cfg[C_ROUTE_EST] <= 0:
+            return False
+        if bias.rotation != 0.0:
+            return True
+        ratio = self.p.offset.map_turn_min_heading_ratio
+        return var >= ratio * ratio * float(self.filt.P[E_ATT + 2, E_ATT + 2])
 
     def after_match(self, rec: MatchRecord, x_after: F64, aux: F64) -> None:
         """Follow the vehicle along the route after an accepted match."""
