@@ -265,6 +265,16 @@ class PseudoObsParams:
         hi=20,
         step=0.05,
     )
+    weak_along_disagreement: float = param(
+        0.0,
+        "extensions.weak_along_track refuses a fit's along-track only when it also disagrees "
+        "with the filter's along-track position by more than this many of the filter's "
+        "along-track sigmas (0: whenever the fit is the weaker)",
+        unit="sigma",
+        lo=0,
+        hi=100,
+        step=0.5,
+    )
 
 
 @dataclass(frozen=True)
