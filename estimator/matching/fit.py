@@ -54,6 +54,9 @@ class FitSettings:
     is cross-track noise (with ``geometry_covariance``)"""
     weak_along_track: bool = False
     """``extensions.weak_along_track``: along-track weaker than the filter's is not used"""
+    weak_along_disagreement: float = 0.0
+    """``pseudo.weak_along_disagreement``: ... and disagreeing with the filter's along-track
+    position by more than this many of its sigmas (0: always)"""
     window_scale_sigma_m: float = 0.0
     """``extensions.window_scale_covariance``: 1-sigma of the attempt's window length error
     (the filter's along-track velocity sigma times the window's duration), added to an
@@ -117,6 +120,7 @@ def _settings(params: Params) -> FitSettings:
         curvature_covariance=ext.curvature_covariance and ext.geometry_covariance,
         plausible_place=ext.covariance_search and ext.along_track_search,
         weak_along_track=ext.weak_along_track and ext.geometry_covariance,
+        weak_along_disagreement=po.weak_along_disagreement,
     )
 
 
@@ -230,8 +234,12 @@ def fit_window(
     tangent = road.tangent(s_ref)
     normal = np.array([-tangent[1], tangent[0]])
     z = p_ref + lane_offset * normal
-    if observed and settings.weak_along_track and _weaker_than_filter(sigma, tangent, pos_cov2):
-        along = float((p_ref - p_dr) @ tangent)
+    along = float((p_ref - p_dr) @ tangent)
+    if (
+        observed
+        and settings.weak_along_track
+        and _weaker_than_filter(sigma, along, tangent, pos_cov2, settings.weak_along_disagreement)
+    ):
         p_ref = p_ref - along * tangent
         s_ref -= along
         z = z - along * tangent
@@ -267,12 +275,21 @@ def fit_window(
     )
 
 
-def _weaker_than_filter(along_sigma: float, tangent: F64, pos_cov2: F64 | None) -> bool:
-    """The fit's along-track sigma exceeds the filter's own along the road."""
+def _weaker_than_filter(
+    along_sigma: float, along: float, tangent: F64, pos_cov2: F64 | None, disagreement: float
+) -> bool:
+    """The fit's along-track sigma exceeds the filter's own along the road, and its along-track
+    innovation ``along`` exceeds ``disagreement`` of the filter's along-track sigmas.
+
+    Why the second test: the fits of overlapping windows carry one shape error, attempt after
+    attempt, so a weak fit far outside the filter's own along-track uncertainty is more likely
+    that error than news; one within it is the along-track evidence a long tunnel lives on."""
     if pos_cov2 is None:
         return False
     var_p = float(tangent @ pos_cov2 @ tangent)
-    return bool(np.isfinite(var_p) and along_sigma**2 > var_p)
+    return bool(
+        np.isfinite(var_p) and along_sigma**2 > var_p and along * along > disagreement**2 * var_p
+    )
 
 
 _BEND_NODES, _BEND_WEIGHTS = np.polynomial.hermite_e.hermegauss(9)

@@ -265,6 +265,16 @@ class PseudoObsParams:
         hi=20,
         step=0.05,
     )
+    weak_along_disagreement: float = param(
+        5.0,
+        "extensions.weak_along_track refuses a fit's along-track only when it also disagrees "
+        "with the filter's along-track position by more than this many of the filter's "
+        "along-track sigmas (0: whenever the fit is the weaker)",
+        unit="sigma",
+        lo=0,
+        hi=100,
+        step=0.5,
+    )
 
 
 @dataclass(frozen=True)
@@ -472,11 +482,13 @@ class ExtensionParams:
         "previous accepted match",
     )
     weak_along_track: bool = param(
-        False,
-        "a match whose along-track sigma is larger than the filter's own along-track sigma is "
-        "applied across the road only, at the dead-reckoned along-track position: it would add "
-        "little along the road but carry the window's shape error there (a gentle bend under a "
-        "gyro drift fits metres to tens of metres off, the same way attempt after attempt)",
+        True,
+        "a match whose along-track sigma is larger than the filter's own along-track sigma and "
+        "whose along-track innovation exceeds pseudo.weak_along_disagreement of the filter's "
+        "sigmas is applied across the road only, at the dead-reckoned along-track position: it "
+        "would add little along the road but carry the window's shape error there (a gentle "
+        "bend under a gyro drift fits metres to tens of metres off, the same way attempt after "
+        "attempt); off without wheel speed under no_wheel_caution",
     )
     reanchor: bool = param(
         False,
@@ -789,7 +801,8 @@ class Params:
 def matching_params(params: Params, *, have_wheel: bool) -> Params:
     """The parameters the route matcher runs with on a log with or without wheel speed: with
     ``extensions.no_wheel_caution`` and no wheel speed, the switches for a dead-reckoned
-    along-track position that is uncertain by tens to hundreds of metres are on."""
+    along-track position that is uncertain by tens to hundreds of metres are on, and
+    ``weak_along_track`` is off (the filter's along-track is then no yardstick for a fit)."""
     ext = params.extensions
     if have_wheel or not ext.no_wheel_caution:
         return params
@@ -799,6 +812,7 @@ def matching_params(params: Params, *, have_wheel: bool) -> Params:
         curvature_covariance=True,
         overlap_inflation=True,
         window_scale_covariance=True,
+        weak_along_track=False,
     )
     return params if cautious == ext else replace(params, extensions=cautious)
 

@@ -219,6 +219,7 @@ def test_rivals_are_the_fit_on_their_pieces(seed, change):
                 settings_,
                 pointwise_residual=True,
                 grid_scan=True,
+                pos_cov2=cov,
             )
             if fit is not None:
                 want.append((piece_at.rival, fit))
