@@ -96,6 +96,7 @@ BIASED_RUNS = {
         "proposed",
         {"extensions.map_turn_estimate": True, "offset.map_turn_honest_prior": True},
     ),
+    "routefuse + `gyro_scale_consider`": ("proposed", {"extensions.gyro_scale_consider": True}),
     "routefuse + `reanchor`": ("proposed", {"extensions.reanchor": True}),
     "routefuse + `reanchor`, `map_bias` off": (
         "proposed",
