@@ -100,6 +100,7 @@ BIASED_RUNS = {
         "proposed",
         {"offset.map_turn_min_heading_ratio": 0.0},
     ),
+    "routefuse + `gyro_scale_consider`": ("proposed", {"extensions.gyro_scale_consider": True}),
     "routefuse + `reanchor`": ("proposed", {"extensions.reanchor": True}),
     "routefuse + `reanchor`, `map_bias` off": (
         "proposed",

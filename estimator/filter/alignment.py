@@ -14,7 +14,7 @@ import numpy as np
 from numpy.typing import NDArray
 
 from estimator.errors import LogError
-from estimator.filter.layout import C_SCALE_ON, NE, NX, X_POS, X_QUAT, X_SCALE, X_VEL
+from estimator.filter.layout import C_SCALE_ON, E_GSF, NE, NX, X_POS, X_QUAT, X_SCALE, X_VEL
 from estimator.filter.quaternion import euler_to_quat, quat_to_dcm
 from estimator.params import Params
 
@@ -98,6 +98,8 @@ def align(
     diag[9:12] = (n.gyro_bias_init_sigma_deg_h * DEG_H) ** 2
     diag[12:15] = (n.accel_bias_init_sigma_mg * MG) ** 2
     diag[15] = n.wheel_scale_sigma**2 if cfg[C_SCALE_ON] > 0 else 0.0
+    if p.extensions.gyro_scale_consider:
+        diag[E_GSF] = (n.gyro_scale_sigma_ppm * 1e-6) ** 2
     return x0, np.diag(diag), k0, t_fix, notes
 
 

@@ -38,7 +38,8 @@ E_GW = 16  # (3)
 E_LANE = 19  # the lane-offset error the route pseudo-positions keep
 E_MAP = 20  # (2) the map-bias error E, N the route pseudo-positions keep (extensions.map_bias)
 E_ROT = 22  # the map's rotation error (rad), considered but where extensions.map_turn_estimate
-NE = 23
+E_GSF = 23  # the z gyro's scale-factor error, always considered (extensions.gyro_scale_consider)
+NE = 24
 
 # aux: bookkeeping
 A_TIME = 0  # time of the state: the last IMU sample processed
@@ -68,7 +69,8 @@ A_MAP_AT = 44  # (2) E, N where E_MAP is the map-bias error (E_ROT turns it else
 A_ROT_EST = 46  # 1: this outage's route pseudo-positions estimate the map's rotation error
 A_ROT = 47  # the map's rotation error estimated since the outage start, rad
 A_ROT_SHIFT = 48  # (2) with it, the map's shift at the origin: sum of -dr J a (a = A_MAP_AT)
-NA = 50
+A_COV_W = 50  # (3) integral of C_bn e_z w_z dt (body z rate) over the pending propagation
+NA = 53
 
 # idx
 I_IMU, I_WHEEL, I_GNSS, I_OUT, NI = 0, 1, 2, 3, 4

@@ -12,6 +12,7 @@ from estimator.filter.layout import (
     A_COV_C,
     A_COV_F,
     A_COV_T,
+    A_COV_W,
     C_ARW2,
     C_QBA,
     C_QBG,
@@ -25,6 +26,7 @@ from estimator.filter.layout import (
     E_ATT,
     E_BA,
     E_BG,
+    E_GSF,
     E_GW,
     E_LANE,
     E_VEL,
@@ -40,22 +42,32 @@ def _f_times(
     Cb: F64,
     fn: F64,
     w: F64,
+    cw0: float,
+    cw1: float,
+    cw2: float,
     inv_tau_g: float,
     inv_tau_a: float,
     inv_tau_w: float,
     out: F64,
 ) -> None:
     """out = F M for the error-state F, using its block sparsity (~50 products per column
-    instead of 361)."""
+    instead of 361). ``cw``: the mean of C_bn e_z w_z, the z gyro's scale-factor error's column."""
     for c in range(NE):
         a0, a1, a2 = M[0, c], M[1, c], M[2, c]
+        s = M[E_GSF, c]
         v0, v1, v2 = M[3, c], M[4, c], M[5, c]
         g0, g1, g2 = M[9, c], M[10, c], M[11, c]
         b0, b1, b2 = M[12, c], M[13, c], M[14, c]
         # attitude: -w x phi - C dbg
-        out[0, c] = -(w[1] * a2 - w[2] * a1) - (Cb[0, 0] * g0 + Cb[0, 1] * g1 + Cb[0, 2] * g2)
-        out[1, c] = -(w[2] * a0 - w[0] * a2) - (Cb[1, 0] * g0 + Cb[1, 1] * g1 + Cb[1, 2] * g2)
-        out[2, c] = -(w[0] * a1 - w[1] * a0) - (Cb[2, 0] * g0 + Cb[2, 1] * g1 + Cb[2, 2] * g2)
+        out[0, c] = (
+            -(w[1] * a2 - w[2] * a1) - (Cb[0, 0] * g0 + Cb[0, 1] * g1 + Cb[0, 2] * g2) - cw0 * s
+        )
+        out[1, c] = (
+            -(w[2] * a0 - w[0] * a2) - (Cb[1, 0] * g0 + Cb[1, 1] * g1 + Cb[1, 2] * g2) - cw1 * s
+        )
+        out[2, c] = (
+            -(w[0] * a1 - w[1] * a0) - (Cb[2, 0] * g0 + Cb[2, 1] * g1 + Cb[2, 2] * g2) - cw2 * s
+        )
         # velocity: -fn x phi - 2 w x dv - C dba
         out[3, c] = (
             -(fn[1] * a2 - fn[2] * a1)
@@ -108,11 +120,12 @@ def flush_into(P: F64, aux: F64, cfg: F64, A: F64, B: F64, Cb: F64, fn: F64) -> 
     for i in range(3):
         fn[i] = aux[A_COV_F + i] / T
     w = cfg[C_WIE : C_WIE + 3]
+    cw0, cw1, cw2 = aux[A_COV_W] / T, aux[A_COV_W + 1] / T, aux[A_COV_W + 2] / T
     itg = 1.0 / cfg[C_TAU_G]
     ita = 1.0 / cfg[C_TAU_A]
     itw = 1.0 / cfg[C_TAU_W]
-    _f_times(P, Cb, fn, w, itg, ita, itw, A)  # A = F P
-    _f_times(A.T, Cb, fn, w, itg, ita, itw, B)  # B = F P F^T
+    _f_times(P, Cb, fn, w, cw0, cw1, cw2, itg, ita, itw, A)  # A = F P
+    _f_times(A.T, Cb, fn, w, cw0, cw1, cw2, itg, ita, itw, B)  # B = F P F^T
     TT = T * T
     for i in range(NE):
         for j in range(i, NE):
@@ -128,13 +141,18 @@ def flush_into(P: F64, aux: F64, cfg: F64, A: F64, B: F64, Cb: F64, fn: F64) -> 
     aux[A_COV_T] = 0.0
     for i in range(12):
         aux[A_COV_C + i] = 0.0
+    for i in range(3):
+        aux[A_COV_W + i] = 0.0
 
 
 @kernel
-def accumulate(aux: F64, C: F64, fn0: float, fn1: float, fn2: float, dt: float) -> None:
-    """Add one IMU interval (attitude ``C``, specific force ``fn`` in ENU) to the pending
-    propagation: the next flush uses their means over the accumulated time."""
+def accumulate(aux: F64, C: F64, fn0: float, fn1: float, fn2: float, wz: float, dt: float) -> None:
+    """Add one IMU interval (attitude ``C``, specific force ``fn`` in ENU, body z rate
+    ``wz``) to the pending propagation: the next flush uses their means over the accumulated
+    time."""
     aux[A_COV_T] += dt
+    for i in range(3):
+        aux[A_COV_W + i] += C[i, 2] * wz * dt
     for i in range(3):
         for j in range(3):
             aux[A_COV_C + 3 * i + j] += C[i, j] * dt

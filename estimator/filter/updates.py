@@ -34,6 +34,7 @@ from estimator.filter.layout import (
     E_ATT,
     E_BA,
     E_BG,
+    E_GSF,
     E_GW,
     E_LANE,
     E_MAP,
@@ -136,6 +137,13 @@ def apply_update(x: F64, P: F64, y: F64, m: int, PHt: F64, Si: F64, scale_on: bo
 
 
 @kernel
+def _considered(i: int, last_considered: int, rot_est: bool) -> bool:
+    if i == E_ROT:
+        return not rot_est
+    return E_LANE <= i < last_considered or i == E_GSF
+
+
+@kernel
 def _apply_gain(
     x: F64,
     P: F64,
@@ -153,7 +161,8 @@ def _apply_gain(
     # for the map bias where a route pseudo-position estimates it) are considered, not
     # estimated (Schmidt): their gain is zero, and the symmetric update below then leaves
     # their covariance as it was; the map's rotation error E_ROT is considered unless
-    # rot_est (a route pseudo-position with extensions.map_turn_estimate)
+    # rot_est (a route pseudo-position with extensions.map_turn_estimate); the z gyro's
+    # scale-factor error E_GSF always is
     for i in range(NE):
         for a in range(m):
             acc = 0.0
@@ -161,11 +170,11 @@ def _apply_gain(
                 acc += PHt[i, b] * Si[b, a]
             K[i, a] = acc  # K = P H^T S^-1
     for i in range(NE):
-        if (E_LANE <= i < last_considered or i == E_ROT) and not (i == E_ROT and rot_est):
+        if _considered(i, last_considered, rot_est):
             for a in range(m):
                 K[i, a] = 0.0
     for i in range(NE):
-        considered = (E_LANE <= i < last_considered or i == E_ROT) and not (i == E_ROT and rot_est)
+        considered = _considered(i, last_considered, rot_est)
         for j in range(i, NE):
             acc = 0.0
             for a in range(m):
@@ -408,7 +417,7 @@ def clone_route_errors(P: F64, aux: F64, cfg: F64, gain: F64, cov: F64, estimate
             rows[k, j] = gain[k, 0] * P[E_POS, j] + gain[k, 1] * P[E_POS + 1, j]
     for k in range(3):
         for j in range(NE):
-            if j < E_LANE:
+            if j < E_LANE or j == E_GSF:
                 P[E_LANE + k, j] = rows[k, j]
                 P[j, E_LANE + k] = rows[k, j]
     for k in range(3):

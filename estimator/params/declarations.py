@@ -475,6 +475,13 @@ class ExtensionParams:
         "that disagree with dead reckoning (fixed-lag re-run from a saved state)",
     )
     wheel_scale_state: bool = param(True, "estimate the wheel-speed scale factor as a state")
+    gyro_scale_consider: bool = param(
+        False,
+        "carry the z gyro's scale-factor error (noise.gyro_scale_sigma_ppm) as a considered "
+        "state: the heading error it makes grows with the angle turned, not with time, and "
+        "is one quantity over the drive, so bias and white-noise terms cannot cover it (a "
+        "spiral tunnel turns the heading by its full error many times)",
+    )
     overlap_inflation: bool = param(
         False,
         "count the along-track evidence of overlapping windows once: an accepted match's "
@@ -670,6 +677,15 @@ class NoiseParams:
         lo=0.01,
         hi=10000,
         step=1,
+    )
+    gyro_scale_sigma_ppm: float = param(
+        1500.0,
+        "1-sigma of the gyro's scale-factor error (a MEMS gyro's datasheet figure; "
+        "extensions.gyro_scale_consider)",
+        unit="ppm",
+        lo=0,
+        hi=50000,
+        step=100,
     )
     accel_bias_init_sigma_mg: float = param(
         10.0, "initial 1-sigma of the accelerometer bias", unit="mg", lo=0.001, hi=500, step=0.5

@@ -128,6 +128,7 @@ def filter_key(p: Params) -> Key:
         p.noise,
         p.sensors,
         ext.wheel_scale_state,
+        ext.gyro_scale_consider,
         ext.robust_gnss,
         ext.portal_rerun,
         p.output_rate_hz,

@@ -64,10 +64,13 @@ def test_covariance_propagation_equals_dense_phi_p_phi_t_plus_q():
     aux[layout.A_COV_T] = T
     aux[layout.A_COV_C : layout.A_COV_C + 9] = (Cb * T).ravel()
     aux[layout.A_COV_F : layout.A_COV_F + 3] = fn * T
+    wz = 0.3
+    aux[layout.A_COV_W : layout.A_COV_W + 3] = Cb[:, 2] * wz * T
     w = cfg[layout.C_WIE : layout.C_WIE + 3]
     F = np.zeros((layout.NE, layout.NE))
     F[0:3, 0:3] = -_skew(w)
     F[0:3, 9:12] = -Cb
+    F[0:3, layout.E_GSF] = -Cb[:, 2] * wz
     F[3:6, 0:3] = -_skew(fn)
     F[3:6, 3:6] = -2 * _skew(w)
     F[3:6, 12:15] = -Cb
@@ -85,6 +88,7 @@ def test_covariance_propagation_equals_dense_phi_p_phi_t_plus_q():
     propagation.flush_covariance(got, aux, cfg)
     np.testing.assert_allclose(got, expected, rtol=1e-12, atol=1e-12)
     assert aux[layout.A_COV_T] == 0.0
+    assert not aux[layout.A_COV_W : layout.A_COV_W + 3].any()
     np.testing.assert_array_equal(got, got.T)
 
 
@@ -145,6 +149,7 @@ def test_a_pseudo_position_estimates_the_route_errors_when_the_bias_is_applied()
     H[:, layout.E_MAP : layout.E_MAP + 2] = np.eye(2)
     K = P @ H.T @ np.linalg.inv(H @ P @ H.T + R)
     K[layout.E_ROT] = 0.0  # the map's rotation error stays considered
+    K[layout.E_GSF] = 0.0  # and so does the gyro's scale-factor error, always
     dx = K @ (z - x[:2])
     I_KH = np.eye(layout.NE) - K @ H
     P_exp = I_KH @ P @ I_KH.T + K @ R @ K.T
