@@ -67,31 +67,47 @@ class DeadReckoningTwin:
     ``undone`` once the outage's route updates were given up for it."""
 
     def __init__(
-        self, state: FilterState, inputs: FilterInputs, *, rows: F64 | None = None
+        self,
+        state: FilterState,
+        inputs: FilterInputs,
+        *,
+        fixes_until: float,
+        rows: F64 | None = None,
     ) -> None:
         x, P, aux, idx = state
         self.x, self.P, self.aux, self.idx = x.copy(), P.copy(), aux.copy(), idx.copy()
         self.idx[I_OUT] = 0
         self.inp = inputs
+        self.fixes_until = fixes_until
+        """the outage's start: the fixes up to it are the filter's too (the last one, at the
+        start itself, comes with the IMU sample after it)"""
+        k = int(np.searchsorted(inputs.gnss_t, fixes_until, side="right"))
+        self.fixes = (inputs.gnss_t[:k], inputs.gnss_pos[:k], inputs.gnss_var[:k])
         self.rows: F64 = np.zeros((ROWS, NO)) if rows is None else rows
         """scratch for the kernel's output rows, shared by copies"""
         self.undone: Undone | None = None
 
     def copy(self) -> DeadReckoningTwin:
         """A copy of the state (a checkpoint's)."""
-        twin = DeadReckoningTwin((self.x, self.P, self.aux, self.idx), self.inp, rows=self.rows)
+        twin = DeadReckoningTwin(
+            (self.x, self.P, self.aux, self.idx),
+            self.inp,
+            fixes_until=self.fixes_until,
+            rows=self.rows,
+        )
         twin.undone = self.undone
         return twin
 
     def advance(self, t_stop: float, source: str) -> None:
-        """Dead-reckon to ``t_stop`` (no fix: the twin lives inside an outage) and propagate
-        the covariance to it."""
+        """Dead-reckon to ``t_stop`` (no fix after the outage's start: the twin lives inside
+        the outage) and propagate the covariance to it."""
         inp = self.inp
-        no_t, no_xyz = np.empty(0), np.empty((0, 3))
+        gnss_t, gnss_pos, gnss_var = self.fixes
         while True:
             status = run_until(
                 t_stop, self.x, self.P, self.aux, self.idx, inp.imu_t, inp.gyro, inp.accel,
-                inp.still, inp.wheel_t, inp.wheel_v, no_t, no_xyz, no_xyz, inp.cfg, self.rows,
+                inp.still, inp.wheel_t, inp.wheel_v, gnss_t, gnss_pos, gnss_var, inp.cfg,
+                self.rows,
             )  # fmt: skip
             if status == STATUS_FULL:
                 self.idx[I_OUT] = 0

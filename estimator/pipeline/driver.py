@@ -346,7 +346,7 @@ class Driver:
                 estimate = turn and ext.map_turn_estimate and self._turn_estimated(bias, var)
                 clone_map_turn(f.P, f.aux, f.x, var, estimate)
                 if ext.dr_separation:
-                    self.twin = DeadReckoningTwin(f.snapshot(), self.inp)
+                    self.twin = DeadReckoningTwin(f.snapshot(), self.inp, fixes_until=a)
             while True:
                 t_try = a + tr.min_outage_s + k * tr.interval_s
                 if t_try >= b or t_try > self.inp.imu_t[-1]:
@@ -757,7 +757,9 @@ class Driver:
             if twin is not None and rec.reanchored:
                 # the filter's covariance was found not to cover its drift: dead reckoning
                 # starts afresh from the re-anchored state
-                self.twin = DeadReckoningTwin(f.snapshot(), self.inp)
+                self.twin = DeadReckoningTwin(
+                    f.snapshot(), self.inp, fixes_until=float(f.aux[A_TIME])
+                )
             elif twin is not None:
                 rec = self._separation_checked(rec, twin)
                 if not rec.accepted:
