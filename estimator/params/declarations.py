@@ -531,8 +531,9 @@ class ExtensionParams:
         True,
         "on a log without wheel speed, switch on covariance_search, curvature_covariance, "
         "overlap_inflation and window_scale_covariance (the dead-reckoned along-track position "
-        "is then uncertain by tens to hundreds of metres, which is what they are for); a log "
-        "with wheel speed is matched as the other switches say",
+        "is then uncertain by tens to hundreds of metres, which is what they are for), and "
+        "switch off weak_along_track and dr_separation (the filter's own covariance is then "
+        "no yardstick); a log with wheel speed is matched as the other switches say",
     )
     map_bias: bool = param(
         True,
@@ -818,7 +819,9 @@ def matching_params(params: Params, *, have_wheel: bool) -> Params:
     """The parameters the route matcher runs with on a log with or without wheel speed: with
     ``extensions.no_wheel_caution`` and no wheel speed, the switches for a dead-reckoned
     along-track position that is uncertain by tens to hundreds of metres are on, and
-    ``weak_along_track`` is off (the filter's along-track is then no yardstick for a fit)."""
+    ``weak_along_track`` and ``dr_separation`` are off (the filter's along-track is then no
+    yardstick for a fit, and dead reckoning's covariance none for the route updates: on the
+    real comma2k19 log without its wheels it undid updates that beat dead reckoning)."""
     ext = params.extensions
     if have_wheel or not ext.no_wheel_caution:
         return params
@@ -829,6 +832,7 @@ def matching_params(params: Params, *, have_wheel: bool) -> Params:
         overlap_inflation=True,
         window_scale_covariance=True,
         weak_along_track=False,
+        dr_separation=False,
     )
     return params if cautious == ext else replace(params, extensions=cautious)
 
