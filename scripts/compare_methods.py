@@ -96,6 +96,10 @@ BIASED_RUNS = {
         "proposed",
         {"offset.map_turn_honest_prior": True},
     ),
+    "routefuse + `map_turn_honest_consider`": (
+        "proposed",
+        {"extensions.map_turn_honest_consider": True},
+    ),
     "routefuse, `offset.map_turn_min_heading_ratio` 0": (
         "proposed",
         {"offset.map_turn_min_heading_ratio": 0.0},

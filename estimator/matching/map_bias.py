@@ -97,6 +97,11 @@ class MapBias:
     moment of one fitted but not applied (its square less its own variance; plus it where the
     bias is applied and ``offset.map_turn_honest_prior``); the outage's pseudo-positions carry
     it as a considered state (``extensions.map_turn_consider``) or estimate it"""
+    turn_second_moment: float = 0.0
+    """the honest second moment of the map's rotation error, rad^2: for a rotation fitted but
+    not applied, its square plus its variance (the error of taking it as zero); else
+    ``turn_var``. A method-of-moments ``turn_var`` of zero claims the map exactly unturned,
+    which a fit within its noise does not show (``extensions.map_turn_honest_consider``)"""
     refused: MapBiasRefusal | None = None
     """why ``measured`` was not applied whatever its significance: too large for a map's
     error, or with a lane too far from the route (another road); None otherwise"""
@@ -406,7 +411,9 @@ def learn_map_bias(
     full = (u, C, G, total)
     turn_var = float(C[3, 3])
     honest_turn_var = turn_var
+    second_moment = turn_var
     if not rotated:
+        second_moment = float(u[3] ** 2 + total[3, 3])
         # a rotation not applied leaves the map turned by what the fit saw, less what its own
         # noise explains (a right map within its noise gains nothing)
         turn_var = max(float(u[3] ** 2 - total[3, 3]), 0.0)
@@ -437,6 +444,7 @@ def learn_map_bias(
             rotated = True
             turn_var = float(C[3, 3])
             honest_turn_var = turn_var
+            second_moment = turn_var
     b, Cb = u[1:3], total[1:3, 1:3]
     chi2 = float(b @ np.linalg.solve(Cb, b))
     t_end = np.array([normal_end[1], -normal_end[0]])
@@ -480,6 +488,7 @@ def learn_map_bias(
         chi2=chi2,
         along_observed=along_observed,
         turn_var=honest_turn_var,
+        turn_second_moment=second_moment,
     )
 
 
@@ -506,7 +515,10 @@ def carried_bias(
     d = position - previous.pivot
     here = offset + previous.rotation * np.array([-d[1], d[0]])
     grow = op.map_bias_walk_m_per_sqrt_km**2 * metres / 1000.0
-    grow += max(previous.rotation_sigma**2, previous.turn_var) * float(d @ d)
+    turn = max(previous.rotation_sigma**2, previous.turn_var)
+    if params.extensions.map_turn_honest_consider:
+        turn = max(turn, previous.turn_second_moment)
+    grow += turn * float(d @ d)
     cov = np.zeros((3, 3))
     cov[1:, 1:] = previous.measured_cov + grow * np.eye(2)
     gain = np.zeros((3, 2))

@@ -566,6 +566,15 @@ class ExtensionParams:
         "walk (which repeated matches average away while they turn the heading to the map's, "
         "but which lets them re-estimate an applied bias where the road turns)",
     )
+    map_turn_honest_consider: bool = param(
+        False,
+        "where an applied bias's fitted rotation is neither applied nor estimated in the "
+        "outage, its pseudo-positions consider the rotation with its honest second moment "
+        "(its square plus its variance), as does a bias carried to the next outage, instead "
+        "of the method of moments (its square less its variance, often zero): a fit within its "
+        "noise does not show the map unturned, and kilometres from where it was learned a "
+        "tenth of a degree is metres the pseudo-positions must not claim to know",
+    )
     map_turn_estimate: bool = param(
         True,
         "estimate the map's rotation error in the outage instead of only considering it, "

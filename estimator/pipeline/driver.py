@@ -344,6 +344,8 @@ class Driver:
                 turn = ext.map_turn_consider
                 var = bias.turn_var if bias is not None and turn else 0.0
                 estimate = turn and ext.map_turn_estimate and self._turn_estimated(bias, var)
+                if turn and not estimate and ext.map_turn_honest_consider:
+                    var = honest_turn_consider(bias, var)
                 clone_map_turn(f.P, f.aux, f.x, var, estimate)
                 if ext.dr_separation:
                     self.twin = DeadReckoningTwin(f.snapshot(), self.inp, fixes_until=a)
@@ -841,6 +843,16 @@ def _track_var(track: F64) -> F64:
     """Each point's own horizontal variance per axis (the mean of E and N)."""
     var: F64 = 0.5 * np.sum(track[:, O_SIG_POS : O_SIG_POS + 2] ** 2, axis=1)
     return var
+
+
+def honest_turn_consider(bias: MapBias | None, var: float) -> float:
+    """The variance of the map's rotation error an outage considers (not estimated) under
+    ``extensions.map_turn_honest_consider``: for an applied bias, at least its fitted
+    rotation's honest second moment. A map found right keeps ``var``: its rotation is part
+    of the null hypothesis the significance test accepted."""
+    if bias is None or not bias.significant:
+        return var
+    return max(var, bias.turn_second_moment)
 
 
 def unapplied_considered(bias: MapBias) -> MapBias:
