@@ -531,8 +531,10 @@ class ExtensionParams:
         True,
         "on a log without wheel speed, switch on covariance_search, curvature_covariance, "
         "overlap_inflation and window_scale_covariance (the dead-reckoned along-track position "
-        "is then uncertain by tens to hundreds of metres, which is what they are for); a log "
-        "with wheel speed is matched as the other switches say",
+        "is then uncertain by tens to hundreds of metres, which is what they are for), and "
+        "offset.map_turn_honest_prior (the weak heading is otherwise turned by a map rotation "
+        "the approach could not tell from zero); a log with wheel speed is matched as the "
+        "other switches say",
     )
     map_bias: bool = param(
         True,
@@ -817,8 +819,11 @@ class Params:
 def matching_params(params: Params, *, have_wheel: bool) -> Params:
     """The parameters the route matcher runs with on a log with or without wheel speed: with
     ``extensions.no_wheel_caution`` and no wheel speed, the switches for a dead-reckoned
-    along-track position that is uncertain by tens to hundreds of metres are on, and
-    ``weak_along_track`` is off (the filter's along-track is then no yardstick for a fit)."""
+    along-track position that is uncertain by tens to hundreds of metres are on,
+    ``weak_along_track`` is off (the filter's along-track is then no yardstick for a fit), and
+    ``offset.map_turn_honest_prior`` is on: without wheel speed the heading drifts fastest, so
+    the matches take a map rotation the approach's fit could not tell from zero (method of
+    moments: no rotation at all) for the heading's error, and turn the heading by it."""
     ext = params.extensions
     if have_wheel or not ext.no_wheel_caution:
         return params
@@ -830,7 +835,10 @@ def matching_params(params: Params, *, have_wheel: bool) -> Params:
         window_scale_covariance=True,
         weak_along_track=False,
     )
-    return params if cautious == ext else replace(params, extensions=cautious)
+    offset = replace(params.offset, map_turn_honest_prior=True)
+    if cautious == ext and offset == params.offset:
+        return params
+    return replace(params, extensions=cautious, offset=offset)
 
 
 def for_method(params: Params, method: Method) -> Params:

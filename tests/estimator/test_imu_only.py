@@ -43,6 +43,8 @@ def test_the_caution_is_only_for_logs_without_wheel_speed() -> None:
     ext = matching_params(p, have_wheel=False).extensions
     assert ext.covariance_search and ext.curvature_covariance and ext.overlap_inflation
     assert ext.window_scale_covariance and not p.extensions.window_scale_covariance
+    assert matching_params(p, have_wheel=False).offset.map_turn_honest_prior
+    assert not p.offset.map_turn_honest_prior
     off = with_values(p, {"extensions.no_wheel_caution": False})
     assert matching_params(off, have_wheel=False) is off
     paper = for_method(p, "paper")
@@ -184,3 +186,21 @@ def test_a_no_odometer_drive_on_a_biased_map_is_no_worse_than_dead_reckoning() -
     assert inputs.log.wheel is None
     baseline = _truth_rmse(inputs, Params(), "baseline")
     assert _truth_rmse(inputs, Params(), "proposed") <= baseline
+
+
+def test_a_map_turned_unseen_on_the_approach_does_not_turn_a_no_odometer_heading() -> None:
+    """Stress drive 22: the multi-tunnel without wheel speed on a map turned 0.19 deg, which the
+    approach's fit cannot tell from zero. Its method-of-moments prior (no rotation) let the
+    matches turn the heading instead of the map, 0.2 m past dead reckoning; the honest prior
+    (on without wheel speed under ``no_wheel_caution``) lets them estimate the rotation."""
+    inputs = build(drive_spec(22)).inputs
+    assert inputs.log.wheel is None
+    baseline = _truth_rmse(inputs, Params(), "baseline")
+    assert _truth_rmse(inputs, Params(), "proposed") <= baseline
+    switches = ("covariance_search", "curvature_covariance", "overlap_inflation")
+    moments = with_values(
+        Params(),
+        {f"extensions.{k}": True for k in (*switches, "window_scale_covariance")}
+        | {"extensions.weak_along_track": False, "extensions.no_wheel_caution": False},
+    )
+    assert _truth_rmse(inputs, moments, "proposed") > baseline
