@@ -527,11 +527,19 @@ class ExtensionParams:
         "fitted with a stretched window is placed that much off along the road, the same way "
         "attempt after attempt",
     )
+    cross_track_heading_widen: bool = param(
+        False,
+        "the first fix after an outage widens the heading's variance by the heading error that "
+        "explains only its innovation across the travel, not along it (a heading error moves "
+        "the vehicle sideways; the along-track part is a speed error, which taken for heading "
+        "error lets that fix and the next turn the velocity); on through no_wheel_caution",
+    )
     no_wheel_caution: bool = param(
         True,
         "on a log without wheel speed, switch on covariance_search, curvature_covariance, "
-        "overlap_inflation and window_scale_covariance (the dead-reckoned along-track position "
-        "is then uncertain by tens to hundreds of metres, which is what they are for), and "
+        "overlap_inflation, window_scale_covariance and cross_track_heading_widen (the "
+        "dead-reckoned along-track position is then uncertain by tens to hundreds of metres, "
+        "which is what they are for), and "
         "offset.map_turn_honest_prior (the weak heading is otherwise turned by a map rotation "
         "the approach could not tell from zero); a log with wheel speed is matched as the "
         "other switches say",
@@ -834,6 +842,7 @@ def matching_params(params: Params, *, have_wheel: bool) -> Params:
         overlap_inflation=True,
         window_scale_covariance=True,
         weak_along_track=False,
+        cross_track_heading_widen=True,
     )
     offset = replace(params.offset, map_turn_honest_prior=True)
     if cautious == ext and offset == params.offset:
