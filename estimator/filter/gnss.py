@@ -21,6 +21,7 @@ from estimator.filter.layout import (
     A_REJECT_SINCE,
     A_TRUST_T,
     A_USED_DIST,
+    C_CROSS_WIDEN,
     C_GNSS_GATE,
     C_LEVER,
     C_RESET_S,
@@ -62,16 +63,25 @@ def widen_position(P: F64, y: F64, S: F64) -> None:
 
 
 @kernel
-def widen_heading(x: F64, P: F64, y: F64, aux: F64) -> None:
+def widen_heading(x: F64, P: F64, y: F64, aux: F64, cross_only: bool) -> None:
     """Widen yaw and horizontal velocity variance by the heading error that explains the fix's
     horizontal innovation over the distance driven since the last fix used (a heading error
     grown linearly over D puts the vehicle about theta * D / 2 off). Widening only the position
     would leave a filter that claims a tenth of a degree of yaw with a heading ten degrees off:
-    each later fix then pulls the position back and the heading drags it away again."""
+    each later fix then pulls the position back and the heading drags it away again.
+
+    ``cross_only`` (``extensions.cross_track_heading_widen``): a heading error moves the
+    vehicle across its travel, so only the innovation's part across the velocity is taken as
+    one; the part along it is a speed error (without wheel speed, tens of metres after an
+    outage), which taken as heading error corrupts the velocity the next fixes correct."""
     dist = aux[A_DIST] - aux[A_USED_DIST]
     if dist < 1.0:
         return
-    theta = min(2.0 * math.hypot(y[0], y[1]) / dist, math.pi / 4)
+    off = math.hypot(y[0], y[1])
+    speed = math.hypot(x[X_VEL], x[X_VEL + 1])
+    if cross_only and speed > 1.0:
+        off = abs(y[0] * x[X_VEL + 1] - y[1] * x[X_VEL]) / speed
+    theta = min(2.0 * off / dist, math.pi / 4)
     var_yaw = theta * theta
     if var_yaw <= P[E_ATT + 2, E_ATT + 2]:
         return
@@ -187,7 +197,7 @@ def gnss_update(
     if not widen and aux[A_REJECT_SINCE] >= 0 and t - aux[A_REJECT_SINCE] > cfg[C_RESET_S]:
         widen = True
     if widen:
-        widen_heading(x, P, y, aux)
+        widen_heading(x, P, y, aux, cfg[C_CROSS_WIDEN] > 0)
         widen_position(P, y, S)
         innovation_cov(P, H, R, 3, PHt, S, Si)
         aux[A_INFLATE] = 0.0

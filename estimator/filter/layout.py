@@ -101,7 +101,8 @@ C_QW_V = 25
 C_ROBUST = 26  # test fixes against the dead-reckoned motion
 C_WHITE_VAR = 27  # typical white variance of a horizontal fix coordinate
 C_ROUTE_EST = 28  # 1: route pseudo-positions estimate the lane-offset and map-bias errors
-NC = 29
+C_CROSS_WIDEN = 29  # 1: a fix's heading widening takes only its innovation across the travel
+NC = 30
 
 # output rows
 O_T = 0

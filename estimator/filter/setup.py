@@ -27,6 +27,7 @@ from estimator.filter.layout import (
     C_AID_DT,
     C_ARW2,
     C_COV_DT,
+    C_CROSS_WIDEN,
     C_GNSS_GATE,
     C_GRAVITY,
     C_LEVER,
@@ -63,7 +64,7 @@ from estimator.log import Log
 from estimator.nav.earth import earth_rate_n, normal_gravity
 from estimator.nav.frames import LocalFrame
 from estimator.nav.rotation import dcm_from_euler
-from estimator.params import Params, SensorParams
+from estimator.params import Params, SensorParams, matching_params
 
 F64 = NDArray[np.float64]
 Outages = tuple[tuple[float, float], ...]
@@ -450,6 +451,8 @@ def kernel_config(p: Params, frame: LocalFrame, wheel_t: F64) -> F64:
     cfg[C_RESET_S] = n.gnss_reset_after_s
     cfg[C_ROBUST] = float(p.extensions.robust_gnss)
     cfg[C_ROUTE_EST] = float(p.extensions.map_bias and p.offset.map_bias_estimated)
+    cautious = matching_params(p, have_wheel=len(wheel_t) > 0)
+    cfg[C_CROSS_WIDEN] = float(cautious.extensions.cross_track_heading_widen)
     gap = float(np.median(np.diff(wheel_t))) if len(wheel_t) > 1 else 0.0
     cfg[C_WHEEL_GAP] = max(0.5, 5 * gap)
     return cfg

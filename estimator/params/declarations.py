@@ -527,13 +527,22 @@ class ExtensionParams:
         "fitted with a stretched window is placed that much off along the road, the same way "
         "attempt after attempt",
     )
+    cross_track_heading_widen: bool = param(
+        False,
+        "the first fix after an outage widens the heading's variance by the heading error that "
+        "explains only its innovation across the travel, not along it (a heading error moves "
+        "the vehicle sideways; the along-track part is a speed error, which taken for heading "
+        "error lets that fix and the next turn the velocity); on through no_wheel_caution",
+    )
     no_wheel_caution: bool = param(
         True,
         "on a log without wheel speed, switch on covariance_search, curvature_covariance, "
-        "overlap_inflation and window_scale_covariance (the dead-reckoned along-track position "
-        "is then uncertain by tens to hundreds of metres, which is what they are for), and "
-        "switch off weak_along_track and dr_separation (the filter's own covariance is then "
-        "no yardstick); a log with wheel speed is matched as the other switches say",
+        "overlap_inflation, window_scale_covariance and cross_track_heading_widen (the "
+        "dead-reckoned along-track position is then uncertain by tens to hundreds of metres, "
+        "which is what they are for) and offset.map_turn_honest_prior (the weak heading is "
+        "otherwise turned by a map rotation the approach could not tell from zero), and switch "
+        "off weak_along_track and dr_separation (the filter's own covariance is then no "
+        "yardstick); a log with wheel speed is matched as the other switches say",
     )
     map_bias: bool = param(
         True,
@@ -827,10 +836,13 @@ class Params:
 def matching_params(params: Params, *, have_wheel: bool) -> Params:
     """The parameters the route matcher runs with on a log with or without wheel speed: with
     ``extensions.no_wheel_caution`` and no wheel speed, the switches for a dead-reckoned
-    along-track position that is uncertain by tens to hundreds of metres are on, and
+    along-track position that is uncertain by tens to hundreds of metres are on,
     ``weak_along_track`` and ``dr_separation`` are off (the filter's along-track is then no
     yardstick for a fit, and dead reckoning's covariance none for the route updates: on the
-    real comma2k19 log without its wheels it undid updates that beat dead reckoning)."""
+    real comma2k19 log without its wheels it undid updates that beat dead reckoning), and
+    ``offset.map_turn_honest_prior`` is on: without wheel speed the heading drifts fastest, so
+    the matches take a map rotation the approach's fit could not tell from zero (method of
+    moments: no rotation at all) for the heading's error, and turn the heading by it."""
     ext = params.extensions
     if have_wheel or not ext.no_wheel_caution:
         return params
@@ -842,8 +854,12 @@ def matching_params(params: Params, *, have_wheel: bool) -> Params:
         window_scale_covariance=True,
         weak_along_track=False,
         dr_separation=False,
+        cross_track_heading_widen=True,
     )
-    return params if cautious == ext else replace(params, extensions=cautious)
+    offset = replace(params.offset, map_turn_honest_prior=True)
+    if cautious == ext and offset == params.offset:
+        return params
+    return replace(params, extensions=cautious, offset=offset)
 
 
 def for_method(params: Params, method: Method) -> Params:

@@ -825,7 +825,7 @@ class Driver:
         if not should_reanchor(run, self.p):
             return rec
         y = np.ascontiguousarray(rec.innovation, np.float64)
-        widen_heading(f.x, f.P, y, f.aux)
+        widen_heading(f.x, f.P, y, f.aux, self.p.extensions.cross_track_heading_widen)
         widen_to_innovation(f.P, y, s + applied_obs_cov(rec, self.p))
         return dataclasses.replace(rec, accepted=True, reanchored=True)
 

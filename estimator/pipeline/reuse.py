@@ -131,6 +131,8 @@ def filter_key(p: Params) -> Key:
         ext.gyro_scale_consider,
         ext.robust_gnss,
         ext.portal_rerun,
+        ext.cross_track_heading_widen,
+        ext.no_wheel_caution,
         p.output_rate_hz,
     )
 

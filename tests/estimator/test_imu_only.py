@@ -12,6 +12,7 @@ import pytest
 from estimator.errors import LogError
 from estimator.evaluation.metrics import method_metrics
 from estimator.filter import layout as ly
+from estimator.filter.gnss import widen_heading
 from estimator.io import TopicChoice
 from estimator.matching.fit import FitSettings, _bend_variance, fit_window
 from estimator.matching.geometry import Polyline
@@ -46,6 +47,9 @@ def test_the_caution_is_only_for_logs_without_wheel_speed() -> None:
     # the filter's own covariance is no yardstick without an odometer
     assert p.extensions.dr_separation and not ext.dr_separation
     assert p.extensions.weak_along_track and not ext.weak_along_track
+    assert matching_params(p, have_wheel=False).offset.map_turn_honest_prior
+    assert ext.cross_track_heading_widen and not p.extensions.cross_track_heading_widen
+    assert not p.offset.map_turn_honest_prior
     off = with_values(p, {"extensions.no_wheel_caution": False})
     assert matching_params(off, have_wheel=False) is off
     paper = for_method(p, "paper")
@@ -201,3 +205,63 @@ def test_a_no_odometer_drive_on_a_biased_map_is_no_worse_than_dead_reckoning() -
     assert inputs.log.wheel is None
     baseline = _truth_rmse(inputs, Params(), "baseline")
     assert _truth_rmse(inputs, Params(), "proposed") <= baseline
+
+
+def _cautious_but(**values: bool) -> Params:
+    """What ``no_wheel_caution`` switches on for a log without wheel speed, spelled out with
+    ``values`` changed (``matching_params`` would switch them back on)."""
+    on = {
+        "extensions.covariance_search": True,
+        "extensions.curvature_covariance": True,
+        "extensions.overlap_inflation": True,
+        "extensions.window_scale_covariance": True,
+        "extensions.cross_track_heading_widen": True,
+        "offset.map_turn_honest_prior": True,
+        "extensions.weak_along_track": False,
+        "extensions.no_wheel_caution": False,
+    }
+    return with_values(Params(), on | values)
+
+
+def test_a_map_turned_unseen_on_the_approach_does_not_turn_a_no_odometer_heading() -> None:
+    """Stress drive 22: the multi-tunnel without wheel speed on a map turned 0.19 deg, which the
+    approach's fit cannot tell from zero. Its method-of-moments prior (no rotation) let the
+    matches turn the heading instead of the map, 0.2 m past dead reckoning; the honest prior
+    (on without wheel speed under ``no_wheel_caution``) lets them estimate the rotation."""
+    inputs = build(drive_spec(22)).inputs
+    assert inputs.log.wheel is None
+    baseline = _truth_rmse(inputs, Params(), "baseline")
+    assert _truth_rmse(inputs, Params(), "proposed") <= baseline
+    moments = _cautious_but(**{"offset.map_turn_honest_prior": False})
+    assert _truth_rmse(inputs, moments, "proposed") > baseline
+
+
+def test_an_along_track_miss_at_the_portal_is_not_taken_for_a_heading_error() -> None:
+    """Stress drive 42: without wheel speed the first fix after the tunnel is 12 m off along
+    the road. Widening the heading by all of it (0.9 deg) let the fixes that followed corrupt
+    the velocity, and the next tunnel ran 15 m off (7.9 m RMSE against dead reckoning's 4.5);
+    ``cross_track_heading_widen`` (on through ``no_wheel_caution``) widens it by the
+    innovation across the travel only."""
+    inputs = build(drive_spec(42)).inputs
+    assert inputs.log.wheel is None
+    baseline = _truth_rmse(inputs, Params(), "baseline")
+    assert _truth_rmse(inputs, Params(), "proposed") <= baseline
+    whole = _cautious_but(**{"extensions.cross_track_heading_widen": False})
+    assert _truth_rmse(inputs, whole, "proposed") > baseline
+
+
+def test_the_heading_widening_takes_the_innovation_across_the_travel_only() -> None:
+    x, aux = np.zeros(ly.NX), np.zeros(ly.NA)
+    x[ly.X_VEL] = 20.0  # driving east
+    aux[ly.A_DIST] = 1000.0
+    along, across = np.array([12.0, 0.0]), np.array([0.0, 12.0])
+    for y, cross_only, widened in (
+        (along, False, True),
+        (along, True, False),
+        (across, True, True),
+    ):
+        P = np.eye(ly.NE) * 1e-6
+        widen_heading(x, P, y, aux, cross_only)
+        grown = P[ly.E_ATT + 2, ly.E_ATT + 2] - 1e-6
+        assert (grown == pytest.approx((2 * 12.0 / 1000.0) ** 2)) == widened
+        assert (grown > 0) == widened
