@@ -208,46 +208,36 @@ def test_a_no_odometer_drive_on_a_biased_map_is_no_worse_than_dead_reckoning() -
 
 
 def _cautious_but(**values: bool) -> Params:
-    """What ``no_wheel_caution`` switches on for a log without wheel speed, spelled out with
-    ``values`` changed (``matching_params`` would switch them back on)."""
-    on = {
-        "extensions.covariance_search": True,
-        "extensions.curvature_covariance": True,
-        "extensions.overlap_inflation": True,
-        "extensions.window_scale_covariance": True,
-        "extensions.cross_track_heading_widen": True,
-        "offset.map_turn_honest_prior": True,
-        "extensions.weak_along_track": False,
-        "extensions.no_wheel_caution": False,
-    }
-    return with_values(Params(), on | values)
+    """What ``no_wheel_caution`` makes of the defaults for a log without wheel speed, with
+    ``values`` changed (the caution itself off, or ``matching_params`` would set them again)."""
+    cautious = matching_params(Params(), have_wheel=False)
+    return with_values(cautious, {"extensions.no_wheel_caution": False, **values})
 
 
-def test_a_map_turned_unseen_on_the_approach_does_not_turn_a_no_odometer_heading() -> None:
-    """Stress drive 22: the multi-tunnel without wheel speed on a map turned 0.19 deg, which the
-    approach's fit cannot tell from zero. Its method-of-moments prior (no rotation) let the
-    matches turn the heading instead of the map, 0.2 m past dead reckoning; the honest prior
-    (on without wheel speed under ``no_wheel_caution``) lets them estimate the rotation."""
-    inputs = build(drive_spec(22)).inputs
+@pytest.mark.parametrize(
+    ("index", "switch"),
+    [
+        # a map turned 0.19 deg, which the approach's fit cannot tell from zero: its
+        # method-of-moments prior (no rotation) let the matches turn the heading instead of
+        # the map, 0.2 m past dead reckoning; the honest prior lets them estimate the rotation
+        (22, "offset.map_turn_honest_prior"),
+        # the first fix after the tunnel is 12 m off along the road: widening the heading by
+        # all of it (0.9 deg) let the fixes that followed corrupt the velocity, and the next
+        # tunnel ran 15 m off (7.9 m RMSE against dead reckoning's 4.5); widened by the
+        # innovation across the travel only, it is not taken for a heading error
+        (42, "extensions.cross_track_heading_widen"),
+    ],
+)
+def test_a_no_odometer_drive_beats_dead_reckoning_by_what_the_caution_turns_on(
+    index: int, switch: str
+) -> None:
+    """Stress drives without wheel speed whose miss the caution's switch ends (on only
+    through ``no_wheel_caution``): within dead reckoning with it, beyond without it."""
+    inputs = build(drive_spec(index)).inputs
     assert inputs.log.wheel is None
     baseline = _truth_rmse(inputs, Params(), "baseline")
     assert _truth_rmse(inputs, Params(), "proposed") <= baseline
-    moments = _cautious_but(**{"offset.map_turn_honest_prior": False})
-    assert _truth_rmse(inputs, moments, "proposed") > baseline
-
-
-def test_an_along_track_miss_at_the_portal_is_not_taken_for_a_heading_error() -> None:
-    """Stress drive 42: without wheel speed the first fix after the tunnel is 12 m off along
-    the road. Widening the heading by all of it (0.9 deg) let the fixes that followed corrupt
-    the velocity, and the next tunnel ran 15 m off (7.9 m RMSE against dead reckoning's 4.5);
-    ``cross_track_heading_widen`` (on through ``no_wheel_caution``) widens it by the
-    innovation across the travel only."""
-    inputs = build(drive_spec(42)).inputs
-    assert inputs.log.wheel is None
-    baseline = _truth_rmse(inputs, Params(), "baseline")
-    assert _truth_rmse(inputs, Params(), "proposed") <= baseline
-    whole = _cautious_but(**{"extensions.cross_track_heading_widen": False})
-    assert _truth_rmse(inputs, whole, "proposed") > baseline
+    assert _truth_rmse(inputs, _cautious_but(**{switch: False}), "proposed") > baseline
 
 
 def test_the_heading_widening_takes_the_innovation_across_the_travel_only() -> None:
