@@ -98,7 +98,7 @@ def align(
     diag[9:12] = (n.gyro_bias_init_sigma_deg_h * DEG_H) ** 2
     diag[12:15] = (n.accel_bias_init_sigma_mg * MG) ** 2
     diag[15] = n.wheel_scale_sigma**2 if cfg[C_SCALE_ON] > 0 else 0.0
-    if p.extensions.gyro_scale_consider:
+    if p.extensions.gyro_scale_consider or p.extensions.gyro_scale_state:
         diag[E_GSF] = (n.gyro_scale_sigma_ppm * 1e-6) ** 2
     return x0, np.diag(diag), k0, t_fix, notes
 

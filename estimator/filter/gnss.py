@@ -26,7 +26,6 @@ from estimator.filter.layout import (
     C_LEVER,
     C_RESET_S,
     C_ROBUST,
-    C_SCALE_ON,
     C_WHITE_VAR,
     E_ATT,
     E_GW,
@@ -212,6 +211,6 @@ def gnss_update(
     if y[2] * y[2] / S[2, 2] > gate:
         m = 2
         innovation_cov(P, H, R, 2, PHt, S, Si)
-    apply_update(x, P, y, m, PHt, Si, cfg[C_SCALE_ON] > 0)
+    apply_update(x, P, y, m, PHt, Si, cfg)
     aux[A_USED_DIST] = aux[A_DIST]
     return 1

@@ -24,7 +24,8 @@ X_BG = 10  # (3) gyro bias, rad/s
 X_BA = 13  # (3) accelerometer bias, m/s^2
 X_SCALE = 16  # wheel-speed scale factor
 X_GW = 17  # (3) GNSS wander ENU, m
-NX = 20
+X_GSF = 20  # the z gyro's scale-factor error s (measured = (1 + s) true + bias)
+NX = 21
 
 # error state (rows and columns of P)
 E_ATT = 0  # (3) attitude: a rotation of the ENU frame, rad
@@ -38,7 +39,8 @@ E_GW = 16  # (3)
 E_LANE = 19  # the lane-offset error the route pseudo-positions keep
 E_MAP = 20  # (2) the map-bias error E, N the route pseudo-positions keep (extensions.map_bias)
 E_ROT = 22  # the map's rotation error (rad), considered but where extensions.map_turn_estimate
-E_GSF = 23  # the z gyro's scale-factor error, always considered (extensions.gyro_scale_consider)
+E_GSF = 23  # the z gyro's scale-factor error: considered (extensions.gyro_scale_consider) or
+# estimated (extensions.gyro_scale_state, C_GSF_EST)
 NE = 24
 
 # aux: bookkeeping
@@ -102,7 +104,8 @@ C_ROBUST = 26  # test fixes against the dead-reckoned motion
 C_WHITE_VAR = 27  # typical white variance of a horizontal fix coordinate
 C_ROUTE_EST = 28  # 1: route pseudo-positions estimate the lane-offset and map-bias errors
 C_CROSS_WIDEN = 29  # 1: a fix's heading widening takes only its innovation across the travel
-NC = 30
+C_GSF_EST = 30  # 1: the z gyro's scale factor is estimated (E_GSF gets a gain, X_GSF applied)
+NC = 31
 
 # output rows
 O_T = 0

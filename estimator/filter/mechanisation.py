@@ -18,6 +18,7 @@ from estimator.filter.layout import (
     A_PREV_GYRO,
     X_BA,
     X_BG,
+    X_GSF,
     X_GW,
     X_POS,
     X_QUAT,
@@ -45,10 +46,11 @@ def mechanise(
     sample is in ``aux``), velocity with the mid-interval attitude, trapezoidal position, the
     GNSS wander's decay, and the DR track and distance (from the mechanised velocity only).
     Leaves the mid-interval body->ENU matrix in ``C`` and returns the specific force in ENU
-    (both for the covariance propagation)."""
+    (both for the covariance propagation). The z rate is divided by ``1 + X_GSF`` (zero unless
+    extensions.gyro_scale_state estimates the z gyro's scale factor)."""
     wm0 = 0.5 * (aux[A_PREV_GYRO] + gyro[k, 0]) - x[X_BG]
     wm1 = 0.5 * (aux[A_PREV_GYRO + 1] + gyro[k, 1]) - x[X_BG + 1]
-    wm2 = 0.5 * (aux[A_PREV_GYRO + 2] + gyro[k, 2]) - x[X_BG + 2]
+    wm2 = (0.5 * (aux[A_PREV_GYRO + 2] + gyro[k, 2]) - x[X_BG + 2]) / (1.0 + x[X_GSF])
     fm0 = 0.5 * (aux[A_PREV_ACCEL] + accel[k, 0]) - x[X_BA]
     fm1 = 0.5 * (aux[A_PREV_ACCEL + 1] + accel[k, 1]) - x[X_BA + 1]
     fm2 = 0.5 * (aux[A_PREV_ACCEL + 2] + accel[k, 2]) - x[X_BA + 2]

@@ -30,6 +30,7 @@ from estimator.filter.layout import (
     C_CROSS_WIDEN,
     C_GNSS_GATE,
     C_GRAVITY,
+    C_GSF_EST,
     C_LEVER,
     C_NHC_VAR,
     C_OUT_DT,
@@ -453,6 +454,7 @@ def kernel_config(p: Params, frame: LocalFrame, wheel_t: F64) -> F64:
     cfg[C_ROUTE_EST] = float(p.extensions.map_bias and p.offset.map_bias_estimated)
     cautious = matching_params(p, have_wheel=len(wheel_t) > 0)
     cfg[C_CROSS_WIDEN] = float(cautious.extensions.cross_track_heading_widen)
+    cfg[C_GSF_EST] = float(p.extensions.gyro_scale_state)
     gap = float(np.median(np.diff(wheel_t))) if len(wheel_t) > 1 else 0.0
     cfg[C_WHEEL_GAP] = max(0.5, 5 * gap)
     return cfg

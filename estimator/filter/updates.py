@@ -25,6 +25,7 @@ from estimator.filter.layout import (
     A_ROUTE_EST,
     C_AID_DT,
     C_ARW2,
+    C_GSF_EST,
     C_NHC_VAR,
     C_ROUTE_EST,
     C_SCALE_ON,
@@ -45,6 +46,7 @@ from estimator.filter.layout import (
     NE,
     X_BA,
     X_BG,
+    X_GSF,
     X_GW,
     X_POS,
     X_QUAT,
@@ -128,19 +130,21 @@ def nis(y: F64, Si: F64, m: int) -> float:
 
 
 @kernel
-def apply_update(x: F64, P: F64, y: F64, m: int, PHt: F64, Si: F64, scale_on: bool) -> None:
+def apply_update(x: F64, P: F64, y: F64, m: int, PHt: F64, Si: F64, cfg: F64) -> None:
     """x <- x (+) K y, P <- P - K H P, with K = P H^T S^-1 (the error state is injected into
     the nominal state at once, so it is zero between updates)."""
     K = np.empty((NE, 3))
     dx = np.empty(NE)
-    _apply_gain(x, P, y, m, PHt, Si, scale_on, K, dx, NE, False)
+    _apply_gain(x, P, y, m, PHt, Si, cfg, K, dx, NE, False)
 
 
 @kernel
-def _considered(i: int, last_considered: int, rot_est: bool) -> bool:
+def _considered(i: int, last_considered: int, rot_est: bool, gsf_est: bool) -> bool:
     if i == E_ROT:
         return not rot_est
-    return E_LANE <= i < last_considered or i == E_GSF
+    if i == E_GSF:
+        return not gsf_est
+    return E_LANE <= i < last_considered
 
 
 @kernel
@@ -151,7 +155,7 @@ def _apply_gain(
     m: int,
     PHt: F64,
     Si: F64,
-    scale_on: bool,
+    cfg: F64,
     K: F64,
     dx: F64,
     last_considered: int,
@@ -162,7 +166,8 @@ def _apply_gain(
     # estimated (Schmidt): their gain is zero, and the symmetric update below then leaves
     # their covariance as it was; the map's rotation error E_ROT is considered unless
     # rot_est (a route pseudo-position with extensions.map_turn_estimate); the z gyro's
-    # scale-factor error E_GSF always is
+    # scale-factor error E_GSF is unless C_GSF_EST (extensions.gyro_scale_state)
+    gsf_est = cfg[C_GSF_EST] > 0
     for i in range(NE):
         for a in range(m):
             acc = 0.0
@@ -170,11 +175,11 @@ def _apply_gain(
                 acc += PHt[i, b] * Si[b, a]
             K[i, a] = acc  # K = P H^T S^-1
     for i in range(NE):
-        if _considered(i, last_considered, rot_est):
+        if _considered(i, last_considered, rot_est, gsf_est):
             for a in range(m):
                 K[i, a] = 0.0
     for i in range(NE):
-        considered = _considered(i, last_considered, rot_est)
+        considered = _considered(i, last_considered, rot_est, gsf_est)
         for j in range(i, NE):
             acc = 0.0
             for a in range(m):
@@ -190,7 +195,7 @@ def _apply_gain(
         for a in range(m):
             acc += K[i, a] * y[a]
         dx[i] = acc  # dx = K y
-    if not scale_on:
+    if not cfg[C_SCALE_ON] > 0:
         dx[E_SCALE] = 0.0
     inject(x, dx)  # x <- x (+) dx
 
@@ -204,6 +209,7 @@ def inject(x: F64, dx: F64) -> None:
         x[X_BG + i] += dx[E_BG + i]
         x[X_BA + i] += dx[E_BA + i]
     x[X_SCALE] += dx[E_SCALE]
+    x[X_GSF] += dx[E_GSF]
     for i in range(3):
         x[X_GW + i] += dx[E_GW + i]
     d = rotvec_quat(dx[0], dx[1], dx[2])
@@ -280,7 +286,7 @@ def body_velocity_update(
         y[0] = -vb1
         y[1] = -vb2
     innovation_cov(P, H, R, m, PHt, S, Si)
-    apply_update(x, P, y, m, PHt, Si, cfg[C_SCALE_ON] > 0)
+    apply_update(x, P, y, m, PHt, Si, cfg)
 
 
 @kernel
@@ -298,7 +304,7 @@ def zupt_update(
         R[a, a] = cfg[C_ZUPT_VAR]
         y[a] = -x[X_VEL + a]  # y = 0 - v
     innovation_cov(P, H, R, 3, PHt, S, Si)
-    apply_update(x, P, y, 3, PHt, Si, cfg[C_SCALE_ON] > 0)
+    apply_update(x, P, y, 3, PHt, Si, cfg)
     n = aux[A_GYRO_N]
     if n >= 2:
         C = np.empty((3, 3))
@@ -315,7 +321,7 @@ def zupt_update(
             wb = C[0, a] * w[0] + C[1, a] * w[1] + C[2, a] * w[2]
             y[a] = aux[A_GYRO_SUM + a] / n - x[X_BG + a] - wb  # y = z - bg - C^T w_ie
         innovation_cov(P, H, R, 3, PHt, S, Si)
-        apply_update(x, P, y, 3, PHt, Si, cfg[C_SCALE_ON] > 0)
+        apply_update(x, P, y, 3, PHt, Si, cfg)
     aux[A_GYRO_N] = 0.0
     for a in range(3):
         aux[A_GYRO_SUM + a] = 0.0
@@ -359,7 +365,7 @@ def pseudo_position_update(
     estimate = cfg[C_ROUTE_EST] > 0 and aux[A_ROUTE_EST] > 0
     rot_est = aux[A_ROT_EST] > 0
     last = E_LANE if estimate else NE
-    _apply_gain(x, P, y, 2, PHt, Si, cfg[C_SCALE_ON] > 0, K, dx, last, rot_est)
+    _apply_gain(x, P, y, 2, PHt, Si, cfg, K, dx, last, rot_est)
     if estimate:
         for k in range(3):
             aux[A_ROUTE + k] += dx[E_LANE + k]
@@ -493,7 +499,7 @@ def heading_update(x: F64, P: F64, aux: F64, cfg: F64, dyaw: float, var: float) 
     quat_to_dcm(x[X_QUAT : X_QUAT + 4], C)
     yaw0 = dcm_to_euler(C)[2]
     innovation_cov(P, H, R, 1, PHt, S, Si)
-    apply_update(x, P, y, 1, PHt, Si, cfg[C_SCALE_ON] > 0)
+    apply_update(x, P, y, 1, PHt, Si, cfg)
     quat_to_dcm(x[X_QUAT : X_QUAT + 4], C)
     d = dcm_to_euler(C)[2] - yaw0
     return math.atan2(math.sin(d), math.cos(d))

@@ -482,6 +482,12 @@ class ExtensionParams:
         "is one quantity over the drive, so bias and white-noise terms cannot cover it (a "
         "spiral tunnel turns the heading by its full error many times)",
     )
+    gyro_scale_state: bool = param(
+        False,
+        "estimate the z gyro's scale factor as a state (prior noise.gyro_scale_sigma_ppm), "
+        "applied in the mechanisation and calibrated wherever GNSS sees the heading after a "
+        "turn; supersedes gyro_scale_consider",
+    )
     overlap_inflation: bool = param(
         False,
         "count the along-track evidence of overlapping windows once: an accepted match's "
