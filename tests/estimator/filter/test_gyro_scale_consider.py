@@ -7,31 +7,17 @@ import math
 
 import numpy as np
 
-from estimator.filter import layout, propagation, updates
+from estimator.filter import layout, updates
+from tests.estimator.filter._turning import quiet_cfg, turned
 
 
-def _turned(P: np.ndarray, angle: float, *, steps: int = 400, rate: float = 0.2) -> None:
-    """Propagate ``P`` through a level turn of ``angle`` rad at ``rate`` rad/s, no noise."""
-    cfg = np.zeros(layout.NC)
-    cfg[layout.C_TAU_G] = cfg[layout.C_TAU_A] = cfg[layout.C_TAU_W] = 1e9
-    aux = np.zeros(layout.NA)
-    dt = angle / rate / steps
-    yaw = 0.0
-    for _ in range(steps):
-        yaw += rate * dt
-        c, s = math.cos(yaw), math.sin(yaw)
-        C = np.array([[c, -s, 0.0], [s, c, 0.0], [0.0, 0.0, 1.0]])
-        propagation.accumulate(aux, C, 0.0, 0.0, 9.81, rate, dt)
-        propagation.flush_covariance(P, aux, np.asarray(cfg))
-
-
-def test_the_heading_variance_grows_with_the_square_of_the_angle_turned() -> None:
+def test_the_heading_variance_grows_with_the_square_of_the_angleturned() -> None:
     sigma = 1500e-6
     for turns in (1.0, 3.0):
         P = np.zeros((layout.NE, layout.NE))
         P[layout.E_GSF, layout.E_GSF] = sigma**2
         angle = 2 * math.pi * turns
-        _turned(P, angle)
+        turned(P, angle)
         yaw = layout.E_ATT + 2
         np.testing.assert_allclose(P[yaw, yaw], (sigma * angle) ** 2, rtol=1e-2)
         np.testing.assert_allclose(P[yaw, layout.E_GSF], -(sigma**2) * angle, rtol=1e-2)
@@ -39,7 +25,7 @@ def test_the_heading_variance_grows_with_the_square_of_the_angle_turned() -> Non
 
 def test_without_the_state_a_turn_adds_no_heading_variance() -> None:
     P = np.zeros((layout.NE, layout.NE))
-    _turned(P, 2 * math.pi)
+    turned(P, 2 * math.pi)
     assert P[layout.E_ATT + 2, layout.E_ATT + 2] == 0.0
 
 
@@ -49,15 +35,12 @@ def test_a_heading_update_reduces_the_heading_variance_but_leaves_the_scale_erro
     P = np.zeros((layout.NE, layout.NE))
     P[layout.E_GSF, layout.E_GSF] = (1500e-6) ** 2
     P[layout.E_ATT + 2, layout.E_ATT + 2] = 1e-6
-    _turned(P, 2 * math.pi)
+    turned(P, 2 * math.pi)
     before = P.copy()
     x = np.zeros(layout.NX)
     x[layout.X_QUAT] = 1.0
     x[layout.X_SCALE] = 1.0
-    aux = np.zeros(layout.NA)
-    cfg = np.zeros(layout.NC)
-    cfg[layout.C_TAU_G] = cfg[layout.C_TAU_A] = cfg[layout.C_TAU_W] = 1e9
-    updates.heading_update(x, P, aux, cfg, 0.01, 1e-8)
+    updates.heading_update(x, P, np.zeros(layout.NA), quiet_cfg(), 0.01, 1e-8)
     yaw = layout.E_ATT + 2
     assert P[yaw, yaw] < 0.1 * before[yaw, yaw]
     assert P[layout.E_GSF, layout.E_GSF] == before[layout.E_GSF, layout.E_GSF]

@@ -9,12 +9,13 @@ from dataclasses import replace
 import numpy as np
 import pytest
 
-from estimator.filter import layout, propagation, updates
+from estimator.filter import layout, updates
 from estimator.filter.engine import Filter
 from estimator.filter.setup import prepare_inputs
 from estimator.params import Params, with_values
 from estimator.sim import simulate
 from estimator.sim.scenarios import long_drive
+from tests.estimator.filter._turning import quiet_cfg, turned
 
 PRIOR = 1500e-6
 
@@ -55,22 +56,12 @@ def test_considered_the_scale_factor_is_never_estimated() -> None:
 def test_a_heading_update_after_a_turn_corrects_the_scale_factor() -> None:
     """The yaw error a turn left correlates with the scale error: with C_GSF_EST the update
     gives the scale factor a gain, shrinks its variance and moves the nominal state."""
-    cfg = np.zeros(layout.NC)
-    cfg[layout.C_TAU_G] = cfg[layout.C_TAU_A] = cfg[layout.C_TAU_W] = 1e9
+    cfg = quiet_cfg()
     cfg[layout.C_GSF_EST] = 1.0
     P = np.zeros((layout.NE, layout.NE))
     P[layout.E_GSF, layout.E_GSF] = PRIOR**2
     P[layout.E_ATT + 2, layout.E_ATT + 2] = 1e-8
-    aux = np.zeros(layout.NA)
-    steps, rate = 400, 0.2
-    dt = 2 * math.pi / rate / steps
-    yaw = 0.0
-    for _ in range(steps):
-        yaw += rate * dt
-        c, s = math.cos(yaw), math.sin(yaw)
-        C = np.array([[c, -s, 0.0], [s, c, 0.0], [0.0, 0.0, 1.0]])
-        propagation.accumulate(aux, C, 0.0, 0.0, 9.81, rate, dt)
-        propagation.flush_covariance(P, aux, cfg)
+    aux = turned(P, 2 * math.pi, cfg=cfg)
     before = P[layout.E_GSF, layout.E_GSF]
     x = np.zeros(layout.NX)
     x[layout.X_QUAT] = 1.0
