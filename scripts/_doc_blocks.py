@@ -1,13 +1,16 @@
 """What the measuring scripts share: a marked block of a markdown document replaced by a new
-table (``<!-- script.py: name begin -->`` ... ``<!-- script.py: name end -->``), and their rows
-written as CSV."""
+table (``<!-- script.py: name begin -->`` ... ``<!-- script.py: name end -->``), their rows
+written as CSV, and their cases run as Dask tasks."""
 
 from __future__ import annotations
 
 import csv
 import re
+from collections.abc import Callable, Sequence
 from pathlib import Path
-from typing import Any
+from typing import Any, TypeVar
+
+T = TypeVar("T")
 
 
 def replace_block(text: str, mark: str, name: str, body: str) -> str:
@@ -34,3 +37,26 @@ def write_rows(path: Path, rows: list[dict[str, Any]]) -> None:
         writer = csv.DictWriter(f, columns)
         writer.writeheader()
         writer.writerows(rows)
+
+
+def run_in_workers(
+    task: Callable[[T], dict[str, Any]], items: Sequence[T], *, workers: int, label: str
+) -> list[dict[str, Any]]:
+    """``task`` on each of ``items`` in a local Dask cluster of ``workers`` single-threaded
+    workers (one retry), the rows in the order of ``items``; progress on stderr as
+    ``label: done/total``."""
+    import sys
+
+    from distributed import Client, LocalCluster, as_completed
+
+    with (
+        LocalCluster(n_workers=workers, threads_per_worker=1, dashboard_address=None) as cluster,
+        Client(cluster) as client,
+    ):
+        futures = client.map(task, items, pure=False, retries=1)
+        order = {f.key: i for i, f in enumerate(futures)}
+        done: list[tuple[int, dict[str, Any]]] = []
+        for n, future in enumerate(as_completed(futures), 1):
+            done.append((order[future.key], future.result()))
+            print(f"{label}: {n}/{len(items)}", file=sys.stderr, flush=True)
+    return [row for _, row in sorted(done, key=lambda d: d[0])]

@@ -35,7 +35,7 @@ from typing import Any
 REPO = Path(__file__).resolve().parents[1]
 sys.path.insert(0, str(REPO))
 
-from _doc_blocks import write_block, write_rows  # noqa: E402
+from _doc_blocks import run_in_workers, write_block, write_rows  # noqa: E402
 
 COMMA = REPO.parent / "shared" / "data" / "comma2k19"
 COMMA_CONFIG = REPO / "sample_logs" / "configs" / "comma2k19_i280.toml"
@@ -142,22 +142,6 @@ def cases(sims: int) -> list[tuple[str, Any]]:
     )
 
 
-def _rows(todo: list[tuple[str, Any]], workers: int) -> list[dict[str, Any]]:
-    from distributed import Client, LocalCluster, as_completed
-
-    with (
-        LocalCluster(n_workers=workers, threads_per_worker=1, dashboard_address=None) as cluster,
-        Client(cluster) as client,
-    ):
-        futures = client.map(run_case, todo, pure=False, retries=1)
-        order = {id(f): i for i, f in enumerate(futures)}
-        done: list[tuple[int, dict[str, Any]]] = []
-        for n, future in enumerate(as_completed(futures), 1):
-            done.append((order[id(future)], future.result()))
-            print(f"imu_only: {n}/{len(todo)} cases", file=sys.stderr, flush=True)
-    return [row for _, row in sorted(done, key=lambda d: d[0])]
-
-
 def _f(v: float | None) -> str:
     return "-" if v is None else f"{v:.2f}"
 
@@ -211,7 +195,7 @@ def main(argv: list[str] | None = None) -> int:
     parser.add_argument("--write", action="store_true", help="write docs/integrity.md's table")
     args = parser.parse_args(argv)
     started = time.perf_counter()
-    rows = _rows(cases(args.sims), args.workers)
+    rows = run_in_workers(run_case, cases(args.sims), workers=args.workers, label="imu_only")
     text = table(rows)
     print(text)
     print(f"imu_only: {time.perf_counter() - started:.0f} s", file=sys.stderr)

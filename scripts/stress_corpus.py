@@ -24,7 +24,7 @@ from typing import Any
 REPO = Path(__file__).resolve().parents[1]
 sys.path.insert(0, str(REPO))
 
-from _doc_blocks import write_block, write_rows  # noqa: E402
+from _doc_blocks import run_in_workers, write_block, write_rows  # noqa: E402
 
 RUNS: dict[str, tuple[str, dict[str, Any]]] = {
     "baseline": ("baseline", {}),
@@ -85,21 +85,6 @@ def run_drive(index: int) -> dict[str, Any]:
     return row
 
 
-def _rows(drives: int, workers: int) -> list[dict[str, Any]]:
-    from distributed import Client, LocalCluster, as_completed
-
-    with (
-        LocalCluster(n_workers=workers, threads_per_worker=1, dashboard_address=None) as cluster,
-        Client(cluster) as client,
-    ):
-        futures = client.map(run_drive, range(drives), pure=False, retries=1)
-        rows = []
-        for done, future in enumerate(as_completed(futures), 1):
-            rows.append(future.result())
-            print(f"stress: {done}/{drives} drives", file=sys.stderr, flush=True)
-    return sorted(rows, key=lambda r: r["drive"])
-
-
 def summary(rows: list[dict[str, Any]]) -> str:
     """The markdown summary of the corpus: overall and per fault."""
     ok = [r for r in rows if not r["error"] and r["baseline_truth_rmse_m"] is not None]
@@ -150,7 +135,7 @@ def main(argv: list[str] | None = None) -> int:
     parser.add_argument("--write", action="store_true", help="write docs/integrity.md's summary")
     args = parser.parse_args(argv)
     started = time.perf_counter()
-    rows = _rows(args.drives, args.workers)
+    rows = run_in_workers(run_drive, range(args.drives), workers=args.workers, label="stress")
     text = summary(rows)
     print(text)
     print(f"stress: {time.perf_counter() - started:.0f} s", file=sys.stderr)
