@@ -307,6 +307,38 @@ def _with_shape_row(
     )
 
 
+def _fit_with_shape(
+    A: F64,
+    d: F64,
+    nrm: F64,
+    weights: F64,
+    P0: F64,
+    mean: F64,
+    xy: F64,
+    track_cov: F64,
+    route: Route,
+    end_s: float,
+    params: Params,
+) -> tuple[F64, F64, F64, tuple[F64, F64, F64, F64]] | None:
+    """The bias fit in two passes: the cross-track rows (``A``, ``d``, ``nrm``, ``weights``;
+    unknowns lane, shift E, N and, with a fourth column, a rotation about the track's end)
+    solved once, then again with the shape's along-track row against ``route`` moved back by
+    that first solve (:func:`_with_shape_row`). Returns (u, C, G) of the second solve and the
+    rows it used, or None when the cross-track residual exceeds
+    ``offset.map_bias_max_residual_m`` (a track that does not follow the route)."""
+    n_lateral = len(d)
+    first = _solve(A, d, weights, P0, nrm, mean)[0]
+    rotation = float(first[3]) if len(first) > 3 else 0.0
+    moved = Route(xy_moved_back(route.xy, first[1:3], rotation, xy[-1]))
+    rows = _with_shape_row(A, d, nrm, weights, xy, track_cov, moved, end_s, first, params)
+    A, d, nrm, weights = rows
+    u, C, G = _solve(A, d, weights, P0, nrm, mean)
+    residual = float(np.sqrt(np.mean((d[:n_lateral] - A[:n_lateral] @ u) ** 2)))
+    if not np.isfinite(residual) or residual > params.offset.map_bias_max_residual_m:
+        return None
+    return u, C, G, rows
+
+
 def _along_by_shape(
     xy: F64, track_cov: F64, route: Route, *, s_guess: float, lane: float, params: Params
 ) -> tuple[float, F64, float] | None:
@@ -388,7 +420,6 @@ def learn_map_bias(
     rel = rows.points - end
     turned = np.column_stack([-rel[:, 1], rel[:, 0]])  # J (x - x_e)
     A = np.column_stack([np.ones(len(d)), -nrm, -np.sum(nrm * turned, axis=1)])
-    n_lateral = len(d)
     P0 = np.zeros((4, 4))
     P0[0, 0] = op.map_bias_lane_sigma_m**2
     P0[1:3, 1:3] = _prior_cov(params, normal_end)
@@ -397,15 +428,10 @@ def learn_map_bias(
     # bias and lane (matched to a wrong lane, a bend's arc length is off): t . b = t . b1 + y,
     # the track's common error entering as -t . eps
     mean = np.array([op.map_bias_lane_prior_m, 0.0, 0.0, 0.0])
-    u1 = _solve(A, d, weights, P0, nrm, mean)[0]
-    moved = Route(xy_moved_back(route.xy, u1[1:3], float(u1[3]), end))
-    A, d, nrm, weights = _with_shape_row(
-        A, d, nrm, weights, xy, track_cov, moved, end_s, u1, params
-    )
-    u, C, G = _solve(A, d, weights, P0, nrm, mean)
-    residual = float(np.sqrt(np.mean((d[:n_lateral] - A[:n_lateral] @ u) ** 2)))
-    if not np.isfinite(residual) or residual > op.map_bias_max_residual_m:
+    fit = _fit_with_shape(A, d, nrm, weights, P0, mean, xy, track_cov, route, end_s, params)
+    if fit is None:
         return prior
+    u, C, G, (A, d, nrm, weights) = fit
     total = C + G @ track_cov @ G.T
     rotated = u[3] ** 2 / total[3, 3] >= op.map_bias_min_sigmas**2
     full = (u, C, G, total)
@@ -565,20 +591,14 @@ def refined_bias(
         return carried
     d, nrm, weights = rows.d, rows.normal, rows.weights
     A = np.column_stack([np.ones(len(d)), -nrm])
-    n_lateral = len(d)
     P0 = np.zeros((3, 3))
     P0[0, 0] = op.map_bias_lane_sigma_m**2
     P0[1:, 1:] = carried.cov[1:, 1:]
     mean = np.array([op.map_bias_lane_prior_m, 0.0, 0.0])
-    u1 = _solve(A, d, weights, P0, nrm, mean)[0]
-    again = Route(xy_moved_back(moved.xy, u1[1:], 0.0, end))
-    A, d, nrm, weights = _with_shape_row(
-        A, d, nrm, weights, xy, track_cov, again, end_s, u1, params
-    )
-    u, C, G = _solve(A, d, weights, P0, nrm, mean)
-    residual = float(np.sqrt(np.mean((d[:n_lateral] - A[:n_lateral] @ u) ** 2)))
-    if not np.isfinite(residual) or residual > op.map_bias_max_residual_m:
+    fit = _fit_with_shape(A, d, nrm, weights, P0, mean, xy, track_cov, moved, end_s, params)
+    if fit is None:
         return carried
+    u, C, G, _ = fit
     if abs(u[0]) > op.max_offset_m:
         return carried
     offset = carried.offset + u[1:]
