@@ -425,14 +425,8 @@ class Driver:
         s_last = tr.s
         if len(last):
             s_last = tr.s - (float(aux[A_DIST]) - float(rows[last[-1], O_DIST]))
-        tr.lane = learn_lane_offset(
-            rows[:, O_T],
-            rows[:, O_POS : O_POS + 2],
-            used,
-            self.route,
-            t_end=t_a,
-            params=self.p,
-            s_guess=s_last,
+        tr.lane = self._offset_near_portal(
+            rows, used, t_a, s_last, max_offset_m=self.p.offset.max_offset_m
         )
         tr.t_start = t_a
         previous = None
@@ -453,7 +447,7 @@ class Driver:
                         bias,
                         offset,
                         position=x[:2].copy(),
-                        lane_seen=self._offset_seen(rows, used, t_a, s_last),
+                        lane_seen=self._offset_near_portal(rows, used, t_a, s_last),
                         normal=normal,
                         metres=float(aux[A_DIST]) - pivot_dist,
                         params=self.p,
@@ -474,11 +468,20 @@ class Driver:
             if self.p.extensions.unapplied_bias_consider:
                 tr.bias = unapplied_considered(tr.bias)
 
-    def _offset_seen(self, rows: F64, used: NDArray[np.bool_], t_a: float, s_last: float) -> float:
-        """The cross-track offset from the route learned near the portal, lane and map together,
-        however large: a map shifted sideways puts it beyond ``offset.max_offset_m``, where
-        :func:`learn_lane_offset` returns 0."""
-        op = dataclasses.replace(self.p.offset, max_offset_m=math.inf)
+    def _offset_near_portal(
+        self,
+        rows: F64,
+        used: NDArray[np.bool_],
+        t_a: float,
+        s_last: float,
+        *,
+        max_offset_m: float = math.inf,
+    ) -> float:
+        """The cross-track offset from the route learned near the portal up to ``t_a``
+        (:func:`learn_lane_offset`), lane and map together, 0 beyond ``max_offset_m``: by
+        default however large, since a map shifted sideways puts it beyond
+        ``offset.max_offset_m``, where the lane offset is taken as 0."""
+        op = dataclasses.replace(self.p.offset, max_offset_m=max_offset_m)
         return learn_lane_offset(
             rows[:, O_T],
             rows[:, O_POS : O_POS + 2],
@@ -748,8 +751,9 @@ class Driver:
             rec = self._reanchored(rec)
         twin = self.twin
         if twin is not None:
-            twin.advance(float(f.aux[A_TIME]), self.log.path)
-            if twin.undone is not None and not rec.reanchored:
+            if twin.undone is None:
+                twin.advance(float(f.aux[A_TIME]), self.log.path)
+            elif not rec.reanchored:
                 u = twin.undone
                 gate = undone_gate(u.separation.chi2, u.t - self.log.t_start, self.p.gates)
                 rec = dataclasses.replace(rec, accepted=False, gates=(*rec.gates, gate))
