@@ -7,7 +7,6 @@ from typing import Any
 import numpy as np
 import viser
 
-from estimator.matching.gates import DR_SEPARATION
 from estimator.results import Gate, GateDecision, MatchRecord
 from inspector.controller import Session
 
@@ -55,7 +54,7 @@ def match_markdown(
     lines = [f"**Attempt #{m.index} of {total}{when}{age}: {head}**", ""]
     undone = next((g for g in failed if g.gate is Gate.DR_SEPARATION), None)
     if undone is not None:
-        here = undone.note == DR_SEPARATION.note  # a later attempt's note says when it was
+        here = "dr_separation_m" in m.extra  # the undoing attempt; a later one's note says when
         lines += [f"*{UNDONE_HERE if here else undone.note}*", ""]
     lines += [
         "| gate | value | limit | verdict |",

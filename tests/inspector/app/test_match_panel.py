@@ -39,12 +39,16 @@ def test_match_panel_says_why_route_updates_were_undone():
 
     m = make_run(rejected=()).matches[1]
     failed = GateDecision(Gate.DR_SEPARATION, 14.4, 13.8, "<=", False, DR_SEPARATION.note)
-    undone = dataclasses.replace(m, accepted=False, gates=(*m.gates, failed))
+    # as the driver records it: the undoing attempt carries how far the updates had moved it
+    extra = {**m.extra, "dr_separation_m": 3.8}
+    undone = dataclasses.replace(m, accepted=False, gates=(*m.gates, failed), extra=extra)
     text = match_markdown(undone, t_rel=50.0, total=5)
     assert "Attempt #1 of 5 at t = 50.00 s: REJECTED by dr_separation**" in text
     assert UNDONE_HERE in text
     note = "the outage's route updates were undone at 45.0 s: none taken since"
-    later = dataclasses.replace(undone, gates=(*m.gates, dataclasses.replace(failed, note=note)))
+    later = dataclasses.replace(
+        undone, gates=(*m.gates, dataclasses.replace(failed, note=note)), extra=m.extra
+    )
     text = match_markdown(later, t_rel=60.0, total=5)
     assert f"*{note}*" in text.splitlines()[2] and UNDONE_HERE not in text
     rejected = make_run(rejected=(2,)).matches[2]
