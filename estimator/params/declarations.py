@@ -600,7 +600,7 @@ class ExtensionParams:
         "tenth of a degree is metres the pseudo-positions must not claim to know",
     )
     map_turn_two_places: bool = param(
-        False,
+        True,
         "where a bias is carried to the next outage and refined by the GNSS-good driving in "
         "between, learn the map's rotation from the two places: the carried shift grows "
         "across the line between them with the rotation's honest second moment (not the "
