@@ -104,6 +104,10 @@ BIASED_RUNS = {
         "proposed",
         {"offset.map_turn_min_heading_ratio": 0.0},
     ),
+    "routefuse, `map_turn_two_places` off": (
+        "proposed",
+        {"extensions.map_turn_two_places": False},
+    ),
     "routefuse + `gyro_scale_consider`": ("proposed", {"extensions.gyro_scale_consider": True}),
     "routefuse + `reanchor`": ("proposed", {"extensions.reanchor": True}),
     "routefuse + `reanchor`, `map_bias` off": (

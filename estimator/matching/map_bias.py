@@ -518,6 +518,13 @@ def learn_map_bias(
     )
 
 
+def _carried_turn_var(previous: MapBias) -> float:
+    """The variance of the map's rotation error a carried bias is refined with
+    (``extensions.map_turn_two_places``): the applied rotation's, else the honest second moment
+    of one fitted but not applied, never less than the method of moments'."""
+    return max(previous.rotation_sigma**2, previous.turn_var, previous.turn_second_moment)
+
+
 def carried_bias(
     previous: MapBias,
     offset: F64,
@@ -567,6 +574,7 @@ def refined_bias(
     s_guess: float,
     params: Params,
     track_var: F64 | None = None,
+    metres: float = 0.0,
 ) -> MapBias:
     """The bias ``carried`` from the previous outage (:func:`carried_bias`), refined by the
     GNSS-good driving since (``track_xy`` (N, 2), ending at the vehicle; ``track_cov``,
@@ -578,7 +586,8 @@ def refined_bias(
     bias is the prior of the same least-squares fit, with the route moved back by it; its
     rotation is kept. A stretch that does not follow the moved-back route (residual above
     ``offset.map_bias_max_residual_m``, or a lane beyond ``offset.max_offset_m``) leaves
-    ``carried`` as it is."""
+    ``carried`` as it is. With ``extensions.map_turn_two_places`` the map's rotation is fitted
+    too (:func:`_refined_turn`; ``metres``: the distance driven since ``carried``'s pivot)."""
     op = params.offset
     xy = np.asarray(track_xy, np.float64)[:, :2]
     if not carried.significant or len(xy) < 2:
@@ -589,6 +598,10 @@ def refined_bias(
     rows = _lateral_rows(xy, moved, end_s, track_var, track_cov, params)
     if rows is None:
         return carried
+    if params.extensions.map_turn_two_places:
+        turned = _refined_turn(xy, track_cov, moved, end_s, rows, carried, metres, params)
+        if turned is not None:
+            return turned
     d, nrm, weights = rows.d, rows.normal, rows.weights
     A = np.column_stack([np.ones(len(d)), -nrm])
     P0 = np.zeros((3, 3))
@@ -617,4 +630,80 @@ def refined_bias(
         chi2=float(offset @ np.linalg.solve(b_total, offset)),
         along_observed=math.sqrt(float(t_end @ C[1:, 1:] @ t_end))
         < 0.5 * op.map_bias_prior_sigma_m,
+    )
+
+
+def _refined_turn(
+    xy: F64,
+    track_cov: F64,
+    moved: Route,
+    end_s: float,
+    rows: _LateralRows,
+    carried: MapBias,
+    metres: float,
+    params: Params,
+) -> MapBias | None:
+    """The map's rotation learned from two places (``extensions.map_turn_two_places``): the
+    bias at ``carried``'s pivot and the GNSS-good stretch ``xy`` a distance ``D`` from it,
+    its cross-track ``rows`` against the route ``moved`` back by ``carried``. A rotation error
+    ``r`` about the pivot shifts the map at the stretch by ``r J D``, so the fit's unknowns are
+    the lane, the shift at the stretch's end and ``r`` (about that end), with the prior the
+    carried bias implies: the shift's covariance the pivot's (its measured covariance and the
+    wander since) plus ``s^2 (J D)(J D)^T``, its covariance with ``r`` ``s^2 J D``, where
+    ``s^2`` is the rotation's honest variance (:func:`_carried_turn_var`). GNSS measures the
+    shift at the stretch, so the stretch's cross-track offset tells ``r`` kilometres from the
+    pivot, which one approach cannot tell from the heading's drift. Where ``r`` passes the
+    significance test (``offset.map_turn_two_places_min_sigmas``) the bias is moved to the
+    stretch's end (the new pivot) with the rotation ``carried.rotation + r`` and its sigma;
+    otherwise None (the plain refine follows)."""
+    op = params.offset
+    end = xy[-1]
+    D = end - carried.pivot
+    jd = np.array([-D[1], D[0]])
+    s2 = _carried_turn_var(carried)
+    if s2 <= 0.0:
+        return None
+    d, nrm, weights = rows.d, rows.normal, rows.weights
+    rel = rows.points - end
+    turned = np.column_stack([-rel[:, 1], rel[:, 0]])
+    A = np.column_stack([np.ones(len(d)), -nrm, -np.sum(nrm * turned, axis=1)])
+    P0 = np.zeros((4, 4))
+    P0[0, 0] = op.map_bias_lane_sigma_m**2
+    walk = op.map_bias_walk_m_per_sqrt_km**2 * max(metres, 0.0) / 1000.0
+    P0[1:3, 1:3] = carried.measured_cov + walk * np.eye(2) + s2 * np.outer(jd, jd)
+    P0[1:3, 3] = P0[3, 1:3] = s2 * jd
+    P0[3, 3] = s2
+    mean = np.array([op.map_bias_lane_prior_m, 0.0, 0.0, 0.0])
+    fit = _fit_with_shape(A, d, nrm, weights, P0, mean, xy, track_cov, moved, end_s, params)
+    if fit is None:
+        return None
+    u, C, G, _ = fit
+    total = C + G @ track_cov @ G.T
+    if (
+        abs(u[0]) > op.max_offset_m
+        or u[3] ** 2 / total[3, 3] < op.map_turn_two_places_min_sigmas**2
+    ):
+        return None
+    here = carried.offset + carried.rotation * jd
+    offset = here + u[1:3]
+    b_total = total[1:3, 1:3]
+    normal_end = moved.normal_at(np.array([end_s]))[0]
+    t_end = np.array([normal_end[1], -normal_end[0]])
+    turn_var = float(C[3, 3])
+    return dataclasses.replace(
+        carried,
+        offset=offset,
+        rotation=carried.rotation + float(u[3]),
+        rotation_sigma=math.sqrt(turn_var),
+        pivot=end.copy(),
+        lane=float(u[0]),
+        gain=G[:3],
+        cov=C[:3, :3],
+        measured=offset,
+        measured_cov=b_total,
+        chi2=float(offset @ np.linalg.solve(b_total, offset)),
+        along_observed=math.sqrt(float(t_end @ C[1:3, 1:3] @ t_end))
+        < 0.5 * op.map_bias_prior_sigma_m,
+        turn_var=turn_var,
+        turn_second_moment=turn_var,
     )

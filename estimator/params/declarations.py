@@ -375,6 +375,15 @@ class OffsetParams:
         hi=10,
         step=0.1,
     )
+    map_turn_two_places_min_sigmas: float = param(
+        2.0,
+        "the rotation learned from two places (extensions.map_turn_two_places) is applied "
+        "where it differs from zero by this many sigmas (its prior is the honest second "
+        "moment of the rotation the approach fitted, so a right map's stays near zero)",
+        lo=0,
+        hi=10,
+        step=0.1,
+    )
     map_bias_estimated: bool = param(
         True,
         "the route pseudo-positions of an outage also estimate the learned lane offset's and "
@@ -589,6 +598,16 @@ class ExtensionParams:
         "of the method of moments (its square less its variance, often zero): a fit within its "
         "noise does not show the map unturned, and kilometres from where it was learned a "
         "tenth of a degree is metres the pseudo-positions must not claim to know",
+    )
+    map_turn_two_places: bool = param(
+        True,
+        "where a bias is carried to the next outage and refined by the GNSS-good driving in "
+        "between, learn the map's rotation from the two places: the carried shift grows "
+        "across the line between them with the rotation's honest second moment (not the "
+        "method of moments' zero), and the refine fits the rotation about its own place with "
+        "that prior, applied (with its sigma, the pivot moved there) when significant. One "
+        "approach cannot tell a map's turn from the heading's drift; two GNSS-measured shifts "
+        "kilometres apart can",
     )
     map_turn_estimate: bool = param(
         True,

@@ -453,15 +453,25 @@ class Driver:
                         params=self.p,
                     )
                     if self.p.offset.map_bias_refine and track is not None:
+                        carried = tr.bias
+                        if self.p.extensions.map_turn_two_places:
+                            # fixes refused after an outage leave the estimate where dead
+                            # reckoning put it (metres off across), which the fit of a second
+                            # place would take for the map's turn
+                            track = track[int(np.flatnonzero(track[:, O_GNSS] > 0)[0]) :]
                         tr.bias = refined_bias(
                             track[:, O_POS : O_POS + 2],
                             _track_cov(track),
                             self.route,
-                            carried=tr.bias,
+                            carried=carried,
                             s_guess=s_last,
                             params=self.p,
                             track_var=_track_var(track),
+                            metres=float(track[-1, O_DIST]) - pivot_dist,
                         )
+                        if tr.bias.pivot is not carried.pivot:
+                            # the rotation learned from the two places turns about the new one
+                            tr.pivot_dist = float(track[-1, O_DIST])
                 else:
                     tr.bias = unbiased(self.p, lane=tr.lane, normal=normal, learned=bias)
             tr.lane = tr.bias.lane
