@@ -70,8 +70,11 @@ def heading_observation(rec: MatchRecord, p: Params) -> tuple[float, float] | No
     The rotation that maps the DR window onto the route is the heading error the window was
     dead-reckoned with. Its sigma is that of a rigid fit of ``n_pairs`` points spread over the
     window's length with the registration residual as point noise (sqrt(12 / N) / L), floored
-    at 0.1 deg; the window's own heading drift is part of the residual."""
-    if not (p.extensions.heading_observation and rec.accepted and rec.n_pairs >= 3):
+    at 0.1 deg; the window's own heading drift is part of the residual. A re-anchor after an
+    IMU gap (``extensions.gap_reacquire``) always observes the heading: the gap's turn is what it
+    corrects."""
+    observed = p.extensions.heading_observation or "gap_end_s" in rec.extra
+    if not (observed and rec.accepted and rec.n_pairs >= 3):
         return None
     dyaw = float(rec.rotation_rad)
     length = (rec.n_pairs - 1) * p.window.spacing_m

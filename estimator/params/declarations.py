@@ -518,6 +518,13 @@ class ExtensionParams:
         "only for disagreeing with the filter, by no more than a plausible dead-reckoning drift, "
         "widen the filter's position and heading covariance to the innovation and accept",
     )
+    gap_reacquire: bool = param(
+        True,
+        "after an IMU gap in an outage, whose heading the wheels carried straight across it, "
+        "re-anchor to the route (as extensions.reanchor) once gates.reanchor_after consecutive "
+        "windows wholly after the gap fit it turned by at most 45 deg and placed within what the "
+        "gap explains, refused only for disagreeing with the filter's heading and place",
+    )
     curvature_covariance: bool = param(
         False,
         "a pseudo-position's cross-track variance includes how far the road bends away from "

@@ -31,7 +31,7 @@ from estimator.errors import LogError, RoutefuseError
 from estimator.evaluation.metrics import interval_mask
 from estimator.filter.engine import Filter, epochs_of
 from estimator.filter.gnss import widen_heading
-from estimator.filter.kernel import finite_state
+from estimator.filter.kernel import IMU_GAP_S, finite_state
 from estimator.filter.layout import (
     A_DIST,
     A_DR,
@@ -90,7 +90,7 @@ from estimator.matching.map_bias import (
     unbiased,
     xy_moved_back,
 )
-from estimator.matching.reanchor import should_reanchor, within_drift
+from estimator.matching.reanchor import gap_bound_m, should_reanchor, within_drift
 from estimator.nav.frames import LocalFrame
 from estimator.params import Method, Params, for_method, matching_params
 from estimator.pipeline.reuse import (
@@ -178,7 +178,8 @@ def run(
         + inputs.warnings
         + (route.warnings if route is not None else ())
         + gnss_acceptance_warnings(log, epochs, inputs.degraded)
-        + separation_warnings(driver.records, log.t_start, p),
+        + separation_warnings(driver.records, log.t_start, p)
+        + reacquire_warnings(driver.records, log.t_start),
         _reuse=state,
     )
 
@@ -227,6 +228,25 @@ def separation_warnings(
             f"{p.gates.dr_separation_chi2:g} against what they added to it); the rest of the "
             "outage is dead-reckoned: the route there is off the road, or the filter trusted it "
             "too much"
+        )
+    return tuple(lines)
+
+
+def reacquire_warnings(records: Sequence[MatchRecord], t_start: float) -> tuple[str, ...]:
+    """One line per IMU gap whose heading the route re-acquired (``extensions.gap_reacquire``),
+    at its first re-anchor."""
+    by_gap: dict[float, list[MatchRecord]] = {}
+    for r in records:
+        if "gap_end_s" in r.extra:
+            by_gap.setdefault(r.extra["gap_end_s"], []).append(r)
+    lines = []
+    for end, (first, *more) in by_gap.items():
+        again = f" ({len(more)} more re-anchors after it)" if more else ""
+        lines.append(
+            f"heading re-acquired from the route at {first.t - t_start:.1f} s, after the IMU gap "
+            f"that ended at {end:.1f} s: the windows after it fitted the route turned by "
+            f"{math.degrees(first.rotation_rad):+.1f} deg, a turn of the road inside the gap "
+            f"that the wheels could not see; heading and position re-anchored there{again}"
         )
     return tuple(lines)
 
@@ -283,6 +303,9 @@ class Driver:
         self.track = _Track()
         self.dropped_fixes: list[float] = []
         """times of the fixes the fixed-lag re-runs left out"""
+        imu_t = inputs.imu_t
+        self.gap_ends: F64 = imu_t[1:][np.diff(imu_t) > IMU_GAP_S]
+        """the first IMU sample after each IMU gap the filter bridged"""
         self.copied_whole_run = False
         """the run is the reused one (a baseline after a baseline)"""
         self.twin: DeadReckoningTwin | None = None
@@ -759,6 +782,8 @@ class Driver:
         rec = self.match(f.out, n_out, f.x, f.P, f.aux)
         if not rec.accepted and self.p.extensions.reanchor:
             rec = self._reanchored(rec)
+        if not rec.accepted and self.p.extensions.gap_reacquire:
+            rec = self._reacquired(rec)
         twin = self.twin
         if twin is not None:
             if twin.undone is None:
@@ -814,6 +839,67 @@ class Driver:
         """``rec`` accepted as a re-anchor (:mod:`estimator.matching.reanchor`) after widening
         the filter's heading and position covariance to its innovation, or ``rec`` itself."""
         f = self.filt
+        run = self._refusal_run(rec, since_t=self.track.t_start)
+        if not should_reanchor(run, self.p):
+            return rec
+        y = np.ascontiguousarray(rec.innovation, np.float64)
+        widen_heading(f.x, f.P, y, f.aux, self.p.extensions.cross_track_heading_widen)
+        widen_to_innovation(f.P, y, position_on_map_cov(f.P) + applied_obs_cov(rec, self.p))
+        return dataclasses.replace(rec, accepted=True, reanchored=True)
+
+    def _reacquired(self, rec: MatchRecord) -> MatchRecord:
+        """``rec`` accepted as a re-anchor after an IMU gap in this outage
+        (``extensions.gap_reacquire``), or ``rec`` itself. The wheels carried the position
+        across the gap along the last heading, so where the road turned inside it the heading
+        after it is off by that turn; the wheel-speed and non-holonomic updates cannot see it
+        (they measure the body velocity, which turning heading and velocity together leaves
+        as it is), yet the filter's yaw sigma shrinks back to tenths of a degree within
+        seconds, and every match is then refused for its heading, its rotation and the size of
+        its correction. Once ``gates.reanchor_after`` consecutive attempts whose windows lie
+        wholly after the gap are sound and within what the gap can explain
+        (:func:`~estimator.matching.reanchor.gap_bound_m`), the heading variance is widened to
+        the fitted rotation (with the velocity turned alike), the position covariance to the
+        innovation, and the match is applied."""
+        f = self.filt
+        t_now = float(f.aux[A_TIME])
+        ends = self.gap_ends[(self.gap_ends > self.track.t_start) & (self.gap_ends <= t_now)]
+        if len(ends) == 0:
+            return rec
+        n = f.n_out
+        rows = f.out[:n]
+        j = min(search_right(rows[:, O_T], float(ends[-1])), n - 1)
+        gap_dist = float(rows[j, O_DIST])
+        bridged = gap_dist - float(rows[max(j - 1, 0), O_DIST])
+        clean = gap_dist + self.p.window.length_m
+        if float(f.aux[A_DIST]) < clean:
+            return rec
+        run = self._refusal_run(
+            rec,
+            since_t=float(ends[-1]),
+            since_dist=clean,
+            gap=lambda d: gap_bound_m(bridged, d - gap_dist),
+        )
+        if not should_reanchor(run, self.p, after_gap=True):
+            return rec
+        turn_heading(f.x, f.P, rec.rotation_rad**2)
+        y = np.ascontiguousarray(rec.innovation, np.float64)
+        widen_to_innovation(f.P, y, position_on_map_cov(f.P) + applied_obs_cov(rec, self.p))
+        extra = {**rec.extra, "gap_end_s": float(ends[-1]) - self.log.t_start}
+        return dataclasses.replace(rec, accepted=True, reanchored=True, extra=extra)
+
+    def _refusal_run(
+        self,
+        rec: MatchRecord,
+        *,
+        since_t: float,
+        since_dist: float = -math.inf,
+        gap: Callable[[float], float] | None = None,
+    ) -> list[tuple[MatchRecord, bool]]:
+        """The attempts refused since the last accepted one, ``since_t`` and ``since_dist`` (the
+        distance travelled), oldest first, then ``rec``, each with whether its innovation is
+        within the drift (:func:`~estimator.matching.reanchor.within_drift`, plus ``gap`` of
+        the distance travelled)."""
+        f = self.filt
         used_dist = float(f.aux[A_USED_DIST])
         t_start = self.track.t_start
 
@@ -824,24 +910,20 @@ class Driver:
                 seconds=r.t - t_start,
                 metres=dist - used_dist,
                 params=self.p,
+                gap_m=0.0 if gap is None else gap(dist),
             )
             return r, ok
 
         run: list[tuple[MatchRecord, bool]] = []
         for r in reversed(self.records):
-            if r.t < t_start or r.accepted:
+            dist = float(f.out[r.epoch, O_DIST])
+            if r.t < since_t or dist < since_dist or r.accepted:
                 break
             sigma = f.out[r.epoch, O_SIG_POS : O_SIG_POS + 2]
-            run.append(checked(r, np.diag(sigma**2), float(f.out[r.epoch, O_DIST])))
+            run.append(checked(r, np.diag(sigma**2), dist))
         run.reverse()
-        s = position_on_map_cov(f.P)
-        run.append(checked(rec, s, float(f.aux[A_DIST])))
-        if not should_reanchor(run, self.p):
-            return rec
-        y = np.ascontiguousarray(rec.innovation, np.float64)
-        widen_heading(f.x, f.P, y, f.aux, self.p.extensions.cross_track_heading_widen)
-        widen_to_innovation(f.P, y, s + applied_obs_cov(rec, self.p))
-        return dataclasses.replace(rec, accepted=True, reanchored=True)
+        run.append(checked(rec, position_on_map_cov(f.P), float(f.aux[A_DIST])))
+        return run
 
     def epochs(self) -> Epochs:
         return epochs_of(self.filt.out, self.filt.n_out, self.inp.degraded)
@@ -888,6 +970,17 @@ def unapplied_considered(bias: MapBias) -> MapBias:
     cov = bias.cov.copy()
     cov[1:, 1:] += (v * np.maximum(w, 0.0)) @ v.T
     return dataclasses.replace(bias, cov=cov)
+
+
+def turn_heading(x: F64, P: F64, var: float) -> None:
+    """Add ``var`` (rad^2) of yaw turning the horizontal velocity with it (``dv / dpsi = e_up x
+    v``): a heading error that the body-velocity updates cannot see, which a heading
+    observation then corrects together with the velocity's direction."""
+    j = np.zeros(P.shape[0])
+    j[E_ATT + 2] = 1.0
+    j[E_VEL] = -x[X_VEL + 1]
+    j[E_VEL + 1] = x[X_VEL]
+    P += var * np.outer(j, j)
 
 
 def widen_to_innovation(P: F64, y: F64, s: F64) -> None:

@@ -9,8 +9,10 @@ import numpy as np
 import pytest
 
 from estimator.matching.reanchor import (
+    GAP_TURN_RAD,
     blames_the_filter,
     drift_bound_m,
+    gap_bound_m,
     should_reanchor,
     within_drift,
 )
@@ -21,7 +23,13 @@ from estimator.results import FitSummary, Gate, GateDecision, MatchRecord, Rival
 P = Params()
 
 
-def _record(failed: tuple[Gate, ...], *, residual: float = 1.0, rival_residual: float = 1.0):
+def _record(
+    failed: tuple[Gate, ...],
+    *,
+    residual: float = 1.0,
+    rival_residual: float = 1.0,
+    rotation_deg: float = 0.0,
+):
     gates = tuple(GateDecision(g, 1.0, 0.0, "<=", g not in failed, "") for g in Gate)
     fit = FitSummary(
         along_offset_m=0.0,
@@ -47,7 +55,7 @@ def _record(failed: tuple[Gate, ...], *, residual: float = 1.0, rival_residual: 
         route_segment=np.zeros((0, 2)),
         route_s=(0.0, 0.0),
         n_pairs=40,
-        rotation_rad=0.0,
+        rotation_rad=math.radians(rotation_deg),
         translation=np.zeros(2),
         residual_m=residual,
         heading_cos=1.0,
@@ -121,3 +129,35 @@ def test_widening_makes_the_innovation_one_sigma_in_its_direction() -> None:
     before = P6.copy()
     widen_to_innovation(P6, np.array([0.0, 0.1]), np.eye(2))  # already within: unchanged
     np.testing.assert_array_equal(P6, before)
+
+
+def test_after_an_imu_gap_the_heading_and_the_correction_blame_the_filter() -> None:
+    turned = _record((Gate.HEADING, Gate.ROTATION, Gate.CORRECTION_CAP), rotation_deg=18.0)
+    assert not blames_the_filter(turned, P)
+    assert blames_the_filter(turned, P, after_gap=True)
+    k = P.gates.reanchor_after
+    assert should_reanchor([(turned, True)] * k, P, after_gap=True)
+    assert not should_reanchor([(turned, True)] * k, P)
+
+
+@pytest.mark.parametrize(
+    "record",
+    [
+        _record((Gate.ROTATION,), rotation_deg=math.degrees(GAP_TURN_RAD) + 1.0),
+        _record((Gate.HEADING, Gate.ALTERNATIVE_REVERSED), rotation_deg=10.0),
+        _record((Gate.RESIDUAL, Gate.HEADING), rotation_deg=10.0),
+    ],
+    ids=["turned beyond the gap's bound", "reversed", "bad shape"],
+)
+def test_a_gap_does_not_excuse_a_doubtful_match(record: MatchRecord) -> None:
+    assert not blames_the_filter(record, P, after_gap=True)
+
+
+def test_the_gap_bound_is_half_the_bridge_then_the_gap_turn_over_the_distance() -> None:
+    assert gap_bound_m(400.0, 0.0) == pytest.approx(200.0)
+    assert gap_bound_m(400.0, 300.0) == pytest.approx(200.0 + math.sin(GAP_TURN_RAD) * 300.0)
+    y = np.array([0.0, 300.0])
+    assert not within_drift(y, np.eye(2), seconds=20.0, metres=300.0, params=P)
+    assert within_drift(
+        y, np.eye(2), seconds=20.0, metres=300.0, params=P, gap_m=gap_bound_m(400.0, 300.0)
+    )
