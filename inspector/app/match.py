@@ -18,6 +18,22 @@ UNDONE_HERE = (
 (a REJECTED whose other gates all passed reads as a contradiction without it)"""
 
 
+REANCHORED = (
+    "Accepted although the gates marked failed refused it: consecutive sound matches kept "
+    "being refused for disagreeing with the filter by no more than a plausible drift, so the "
+    "filter's heading and position covariance were widened to this innovation "
+    "(extensions.reanchor)."
+)
+REACQUIRED = (
+    "Accepted although the gates marked failed refused it: the IMU gap that ended at {end:.1f} s "
+    "left the heading off by the road's turn inside it, which the route shows "
+    "({turn:+.1f} deg here); heading and position were re-anchored to the route "
+    "(extensions.gap_reacquire)."
+)
+"""the line under the head of a re-anchored attempt (an ACCEPTED with failed gates reads as a
+contradiction without it)"""
+
+
 def _fmt(v: Any, digits: int = 3) -> str:
     try:
         f = float(v)
@@ -49,6 +65,8 @@ def match_markdown(
     head = "ACCEPTED" if m.accepted else "REJECTED"
     if failed and not m.accepted:
         head += " by " + ", ".join(g.name for g in failed)
+    if m.accepted and m.reanchored:
+        head += " (re-anchored)"
     when = f" at t = {t_rel:.2f} s" if t_rel is not None else ""
     age = f" ({age_s:.2f} s ago)" if age_s > 0.005 else ""
     lines = [f"**Attempt #{m.index} of {total}{when}{age}: {head}**", ""]
@@ -56,6 +74,14 @@ def match_markdown(
     if undone is not None:
         here = "dr_separation_m" in m.extra  # the undoing attempt; a later one's note says when
         lines += [f"*{UNDONE_HERE if here else undone.note}*", ""]
+    if m.accepted and m.reanchored:
+        end = m.extra.get("gap_end_s")
+        why = (
+            REANCHORED
+            if end is None
+            else REACQUIRED.format(end=end, turn=float(np.degrees(m.rotation_rad)))
+        )
+        lines += [f"*{why}*", ""]
     lines += [
         "| gate | value | limit | verdict |",
         "|---|---:|---:|---|",

@@ -53,3 +53,26 @@ def test_match_panel_says_why_route_updates_were_undone():
     assert f"*{note}*" in text.splitlines()[2] and UNDONE_HERE not in text
     rejected = make_run(rejected=(2,)).matches[2]
     assert ": REJECTED by residual**" in match_markdown(rejected, total=5)
+
+
+def test_match_panel_says_why_a_refused_match_was_applied():
+    """A re-anchored attempt is accepted with failed gates: the head says re-anchored and the
+    line under it why, naming the IMU gap when it was a re-acquisition after one."""
+    import dataclasses
+    import math
+
+    from estimator.results import Gate, GateDecision
+    from inspector.app.match import REANCHORED
+
+    m = make_run(rejected=()).matches[1]
+    failed = GateDecision(Gate.ROTATION, 19.9, 15.0, "<=", False, "fitted rotation, deg")
+    turned = dataclasses.replace(
+        m, gates=(*m.gates, failed), reanchored=True, rotation_rad=math.radians(-19.9)
+    )
+    text = match_markdown(turned, t_rel=50.0, total=5)
+    assert "Attempt #1 of 5 at t = 50.00 s: ACCEPTED (re-anchored)**" in text
+    assert REANCHORED in text
+    after_gap = dataclasses.replace(turned, extra={**m.extra, "gap_end_s": 294.2})
+    text = match_markdown(after_gap, t_rel=50.0, total=5)
+    assert "the IMU gap that ended at 294.2 s" in text and "(-19.9 deg here)" in text
+    assert REANCHORED not in text
