@@ -271,7 +271,7 @@ def test_the_approach_counts_the_driving_with_gnss_offered_only() -> None:
 def test_an_outage_after_too_short_an_approach_is_dead_reckoned_with_a_warning(
     outage: tuple[float, float],
 ) -> None:
-    """comma2k19 without its wheels, GNSS lost 5 s (45 m) into the log: the cross-track
+    """comma2k19 without its wheels, GNSS lost 5 s (42 m) into the log: the cross-track
     updates turn the along-track velocity through a heading, tilt and accelerometer bias not
     yet told apart, and end past dead reckoning (20.10 against 19.73 m, 29.23 against 28.51 m,
     measured, AMD EPYC 2 cores). ``calibrated_approach`` leaves the outage to dead reckoning,
