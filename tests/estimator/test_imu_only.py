@@ -177,7 +177,7 @@ def test_the_wheel_topic_can_be_left_out() -> None:
     ("outage", "gain_m"),
     [
         ((25.0, 55.0), 0.0),
-        # 45 s of outage 10 s (115 m of driving with GNSS) in: 83.5 -> 74.4 m (measured, AMD
+        # 45 s of outage 10 s (116 m of driving with GNSS) in: 83.5 -> 74.4 m (measured, AMD
         # EPYC 2 cores); the dead-reckoning twin's test, which undid such updates on the real
         # MEMS unit's too small covariance, is off without an odometer
         ((10.0, 55.0), 5.0),
