@@ -298,3 +298,23 @@ def test_an_outage_after_too_short_an_approach_is_dead_reckoned_with_a_warning(
     again = run_methods(inputs, params, methods=("proposed",), outages=(outage,), reuse=ungated)
     np.testing.assert_array_equal(again["proposed"].epochs.position, prop.epochs.position)
     assert again["proposed"].warnings == prop.warnings
+
+
+def test_a_simulated_drive_losing_gnss_a_few_seconds_in_is_dead_reckoned_there() -> None:
+    """IMU-only drive 4 with GNSS removed 3 s (36 m) into the drive: that outage takes no
+    route updates and matches dead reckoning, the run says so, and the tunnels later on, after
+    kilometres with GNSS, are matched as before."""
+    inputs = build_imu_only(imu_only_spec(4)).inputs
+    outage = (3.0, 30.0)
+    end = inputs.log.t_start + outage[1]
+    session = run_methods(inputs, Params(), outages=(outage,))
+    base, prop = session["baseline"], session["proposed"]
+    assert not [m for m in prop.matches if m.t < end]
+    assert [m for m in prop.matches if m.t > end]
+    early, same = base.epochs.t < end, prop.epochs.t < end
+    np.testing.assert_array_equal(prop.epochs.t[same], base.epochs.t[early])
+    np.testing.assert_array_equal(prop.epochs.position[same], base.epochs.position[early])
+    assert sum(w.startswith("no route updates in the outage") for w in prop.warnings) == 1
+    ungated = _cautious_but(**{"extensions.calibrated_approach": False})
+    again = run_methods(inputs, ungated, methods=("proposed",), outages=(outage,))
+    assert [m for m in again["proposed"].matches if m.t < end]
