@@ -52,6 +52,17 @@ class TriggerParams:
     interval_s: float = param(
         1.0, "time between two match attempts (low-rate updates)", unit="s", lo=0.1, hi=30, step=0.1
     )
+    min_approach_m: float = param(
+        100.0,
+        "driving with GNSS since the filter started that an outage needs before it takes route "
+        "updates (extensions.calibrated_approach): fixes a metre apart fix the heading to about "
+        "a degree only over 100 m, and a cross-track update on a heading, tilt and "
+        "accelerometer bias that are not yet told apart turns the along-track velocity",
+        unit="m",
+        lo=0,
+        hi=2000,
+        step=10,
+    )
 
 
 @dataclass(frozen=True)
@@ -556,15 +567,25 @@ class ExtensionParams:
         "the vehicle sideways; the along-track part is a speed error, which taken for heading "
         "error lets that fix and the next turn the velocity); on through no_wheel_caution",
     )
+    calibrated_approach: bool = param(
+        False,
+        "an outage takes route updates only after trigger.min_approach_m of driving with GNSS "
+        "since the filter started; before that the outage is dead-reckoned, with a warning "
+        "naming it. Without wheel speed a filter that has barely moved under GNSS cannot vouch "
+        "for the updates: its heading, tilt, mounting and accelerometer bias are one blur, and "
+        "every cross-track update moves the along-track velocity through them; on through "
+        "no_wheel_caution",
+    )
     no_wheel_caution: bool = param(
         True,
         "on a log without wheel speed, switch on covariance_search, curvature_covariance, "
-        "overlap_inflation, window_scale_covariance and cross_track_heading_widen (the "
-        "dead-reckoned along-track position is then uncertain by tens to hundreds of metres, "
-        "which is what they are for) and offset.map_turn_honest_prior (the weak heading is "
-        "otherwise turned by a map rotation the approach could not tell from zero), and switch "
-        "off weak_along_track and dr_separation (the filter's own covariance is then no "
-        "yardstick); a log with wheel speed is matched as the other switches say",
+        "overlap_inflation, window_scale_covariance, cross_track_heading_widen and "
+        "calibrated_approach (the dead-reckoned along-track position is then uncertain by tens "
+        "to hundreds of metres, which is what they are for) and offset.map_turn_honest_prior "
+        "(the weak heading is otherwise turned by a map rotation the approach could not tell "
+        "from zero), and switch off weak_along_track and dr_separation (the filter's own "
+        "covariance is then no yardstick); a log with wheel speed is matched as the other "
+        "switches say",
     )
     map_bias: bool = param(
         True,
@@ -868,7 +889,8 @@ class Params:
 def matching_params(params: Params, *, have_wheel: bool) -> Params:
     """The parameters the route matcher runs with on a log with or without wheel speed: with
     ``extensions.no_wheel_caution`` and no wheel speed, the switches for a dead-reckoned
-    along-track position that is uncertain by tens to hundreds of metres are on,
+    along-track position that is uncertain by tens to hundreds of metres are on (and
+    ``calibrated_approach``: an outage after too little GNSS-aided driving is dead-reckoned),
     ``weak_along_track`` and ``dr_separation`` are off (the filter's along-track is then no
     yardstick for a fit, and dead reckoning's covariance none for the route updates: on the
     real comma2k19 log without its wheels it undid updates that beat dead reckoning), and
@@ -887,6 +909,7 @@ def matching_params(params: Params, *, have_wheel: bool) -> Params:
         weak_along_track=False,
         dr_separation=False,
         cross_track_heading_widen=True,
+        calibrated_approach=True,
     )
     offset = replace(params.offset, map_turn_honest_prior=True)
     if cautious == ext and offset == params.offset:

@@ -179,7 +179,8 @@ def run(
         + (route.warnings if route is not None else ())
         + gnss_acceptance_warnings(log, epochs, inputs.degraded)
         + separation_warnings(driver.records, log.t_start, p)
-        + reacquire_warnings(driver.records, log.t_start),
+        + reacquire_warnings(driver.records, log.t_start)
+        + approach_warnings(driver.checkpoints, driver.inp.degraded, log.t_start, p),
         _reuse=state,
     )
 
@@ -249,6 +250,39 @@ def reacquire_warnings(records: Sequence[MatchRecord], t_start: float) -> tuple[
             f"that the wheels could not see; heading and position re-anchored there{again}"
         )
     return tuple(lines)
+
+
+def approach_warnings(
+    checkpoints: Sequence[Checkpoint],
+    degraded: Sequence[tuple[float, float]],
+    t_start: float,
+    p: Params,
+) -> tuple[str, ...]:
+    """One line per outage left to dead reckoning for too short a GNSS-aided approach
+    (``extensions.calibrated_approach``)."""
+    lines = []
+    for c in checkpoints:
+        if c.kind != "outage" or c.uncalibrated_m is None:
+            continue
+        a, b = degraded[c.interval]
+        lines.append(
+            f"no route updates in the outage {a - t_start:.1f}-{b - t_start:.1f} s: only "
+            f"{c.uncalibrated_m:.0f} m of driving with GNSS before it (< "
+            f"trigger.min_approach_m {p.trigger.min_approach_m:g} m without wheel speed), too "
+            "little to calibrate the heading and the accelerometer for them; the outage is "
+            "dead-reckoned"
+        )
+    return tuple(lines)
+
+
+def aided_approach_m(rows: F64, t_a: float, degraded: Sequence[tuple[float, float]]) -> float:
+    """The distance the filter has travelled with GNSS offered (outside ``degraded``) up to
+    ``t_a``: how long a GNSS-aided approach an outage starting there had."""
+    r = rows[rows[:, O_T] <= t_a]
+    if len(r) < 2:
+        return 0.0
+    offered = ~interval_mask(r[1:, O_T], degraded)
+    return float(np.diff(r[:, O_DIST])[offered].sum())
 
 
 def _frame_of(log: Log) -> LocalFrame:
@@ -352,6 +386,14 @@ class Driver:
                 k = 0
                 self._checkpoint("outage", i, 0, dist_a, dist_last)
                 if not self.matching:
+                    continue
+                approach = aided_approach_m(f.out[: f.n_out], a, self.inp.degraded)
+                if (
+                    self.p.extensions.calibrated_approach
+                    and approach < self.p.trigger.min_approach_m
+                ):
+                    cp = dataclasses.replace(self.checkpoints[-1], uncalibrated_m=approach)
+                    self.checkpoints[-1] = cp
                     continue
                 self.begin_interval(a, f.out, f.n_out, f.x, f.aux)
                 bias = self.track.bias

@@ -53,6 +53,9 @@ class Checkpoint:
     dist_last: float
     twin: DeadReckoningTwin | None = None
     """the outage's dead-reckoning twin as it was then (``extensions.dr_separation``)"""
+    uncalibrated_m: float | None = None
+    """an outage left to dead reckoning (``extensions.calibrated_approach``): the driving with
+    GNSS before it, m"""
 
     @property
     def n_out(self) -> int:
@@ -195,6 +198,7 @@ def resume(d: Driver, old: ReuseState, old_params: Params, *, reuse_matching: bo
         and p.extensions.map_turn_consider == old_params.extensions.map_turn_consider
         and p.extensions.map_turn_estimate == old_params.extensions.map_turn_estimate
         and p.extensions.reanchor == old_params.extensions.reanchor
+        and p.extensions.calibrated_approach == old_params.extensions.calibrated_approach
         and p.extensions.dr_separation == old_params.extensions.dr_separation
         and (
             not p.extensions.dr_separation
@@ -230,8 +234,9 @@ def _replay_attempts(d: Driver, old: ReuseState) -> None:
     for n_cp, cp in enumerate(old.checkpoints):
         x, P0, aux0, _ = cp.state
         if cp.kind == "outage":
-            a = d.inp.degraded[cp.interval][0]
-            d.begin_interval(a, old.out, cp.n_out, x, aux0)
+            if cp.uncalibrated_m is None:
+                a = d.inp.degraded[cp.interval][0]
+                d.begin_interval(a, old.out, cp.n_out, x, aux0)
             continue
         P = P0.copy()
         aux = aux0.copy()
