@@ -104,6 +104,14 @@ BIASED_RUNS = {
         "proposed",
         {"offset.map_turn_min_heading_ratio": 0.0},
     ),
+    "routefuse + `offset.map_bias_walk_turned_only`": (
+        "proposed",
+        {"offset.map_bias_walk_turned_only": True},
+    ),
+    "routefuse, `offset.map_bias_walk_m_per_sqrt_km` 0": (
+        "proposed",
+        {"offset.map_bias_walk_m_per_sqrt_km": 0.0},
+    ),
     "routefuse + `gyro_scale_consider`": ("proposed", {"extensions.gyro_scale_consider": True}),
     "routefuse + `reanchor`": ("proposed", {"extensions.reanchor": True}),
     "routefuse + `reanchor`, `map_bias` off": (
