@@ -108,6 +108,14 @@ BIASED_RUNS = {
         "proposed",
         {"extensions.map_turn_two_places": False},
     ),
+    "routefuse + `offset.map_bias_walk_turned_only`": (
+        "proposed",
+        {"offset.map_bias_walk_turned_only": True},
+    ),
+    "routefuse, `offset.map_bias_walk_m_per_sqrt_km` 0": (
+        "proposed",
+        {"offset.map_bias_walk_m_per_sqrt_km": 0.0},
+    ),
     "routefuse + `gyro_scale_consider`": ("proposed", {"extensions.gyro_scale_consider": True}),
     "routefuse + `reanchor`": ("proposed", {"extensions.reanchor": True}),
     "routefuse + `reanchor`, `map_bias` off": (

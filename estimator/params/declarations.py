@@ -413,6 +413,14 @@ class OffsetParams:
         "beside extensions.map_turn_consider (the walk lets the outage's matches re-estimate "
         "the bias where the road turns; off, the considered rotation alone carries it)",
     )
+    map_bias_walk_turned_only: bool = param(
+        False,
+        "an applied bias's error grows by offset.map_bias_walk_m_per_sqrt_km in the outage only "
+        "where the approach fitted a rotation beyond its noise (a map turned away from the "
+        "bias learned at the portal); else the learned bias stays correlated with the position "
+        "error it was cloned from, and the tunnel's bends refine it instead of taking the "
+        "dead-reckoned drift for a change of the map",
+    )
     map_bias_turned_rescue: bool = param(
         False,
         "a bias that the test for another road (offset.map_bias_max_prior_sigmas) refuses as a "

@@ -440,11 +440,14 @@ class Driver:
         (or the outage start) to travelled distance ``d``: the map's error wandering along the
         road (``offset.map_bias_walk_m_per_sqrt_km``), and the learned rotation's uncertainty
         carried further from where it was learned. A bias tested insignificant keeps
-        ``offset.map_bias_null_sigma_m``."""
+        ``offset.map_bias_null_sigma_m``. With ``offset.map_bias_walk_turned_only`` the walk
+        is left out where the approach saw no rotation (``turn_var`` zero)."""
         bias = self.track.bias
         assert bias is not None
         before = dist_last if dist_last > -math.inf else dist_a
         walk = self.p.offset.map_bias_walk_m_per_sqrt_km
+        if self.p.offset.map_bias_walk_turned_only and bias.turn_var <= 0.0:
+            walk = 0.0
         far, near = d - self.track.pivot_dist, before - self.track.pivot_dist
         turn = bias.rotation_sigma**2 * (far * far - near * near)
         if self.p.extensions.map_turn_consider and not self.p.offset.map_bias_turn_walk:
