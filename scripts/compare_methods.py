@@ -49,6 +49,7 @@ from estimator.pipeline import open_inputs, run_methods  # noqa: E402
 from estimator.pipeline.inputs import Inputs  # noqa: E402
 from estimator.results import Run  # noqa: E402
 from estimator.route import Route  # noqa: E402
+from estimator.sim.stress import moved_route  # noqa: E402
 
 SAMPLES = ("long_tunnel", "spiral_tunnel", "multi_tunnel", "monaco_tunnel")
 PAPER_SCENARIO = {
@@ -126,18 +127,10 @@ BIASED_RUNS = {
 """label: (method, parameters) of the runs on the biased map"""
 
 
-def biased_route(route: Route, along_m: float = 10.0, across_m: float = 3.5) -> Route:
-    """``route`` moved rigidly ``along_m`` along its overall direction (first to last vertex)
-    and ``across_m`` to the left of it."""
-    d = route.xy[-1] - route.xy[0]
-    u = d / np.hypot(*d)
-    return Route(route.xy + along_m * u + across_m * np.array([-u[1], u[0]]), name=route.name)
-
-
 def _biased_map(inp: Inputs) -> dict[str, tuple[float, float]]:
     """Truth RMSE / route deviation RMSE of each of :data:`BIASED_RUNS` on the biased map."""
     assert inp.route is not None
-    moved = dataclasses.replace(inp, route=biased_route(inp.route))
+    moved = dataclasses.replace(inp, route=moved_route(inp.route))
     out = {}
     for label, (method, values) in BIASED_RUNS.items():
         r = run_methods(moved, with_values(Params(), values), methods=(method,))[method]

@@ -167,9 +167,16 @@ def map_biased(
     tunnel), then moved ``along_m`` along its overall direction and ``across_m`` to its left."""
     a = math.radians(rotation_deg)
     rot = np.array([[math.cos(a), -math.sin(a)], [math.sin(a), math.cos(a)]])
-    xy = (road.xy - pivot) @ rot.T + pivot
+    xy = road.xy if a == 0.0 else (road.xy - pivot) @ rot.T + pivot
     xy = xy + along_m * _direction(road) + across_m * _left_of(road)
     return Route(xy, name=road.name, source=road.source)
+
+
+def moved_route(road: Route, along_m: float = 10.0, across_m: float = 3.5) -> Route:
+    """The road as an SD map draws it, moved rigidly ``along_m`` along its overall direction
+    and ``across_m`` to its left, unturned: issue 17's moved-map case (10 m along, 3.5 m
+    across)."""
+    return map_biased(road, along_m, across_m, 0.0, pivot=road.xy[0])
 
 
 def _position_at(log: Log, frame: LocalFrame, t: float) -> np.ndarray:

@@ -16,6 +16,7 @@ from estimator.matching.map_bias import MapBias, learn_map_bias, refined_bias
 from estimator.params import Params, with_values
 from estimator.pipeline import open_inputs, run_methods
 from estimator.route import Route
+from estimator.sim.stress import moved_route
 
 SAMPLES = Path(__file__).resolve().parents[3] / "sample_logs"
 P = Params()
@@ -118,17 +119,11 @@ def test_a_shift_at_the_portal_from_a_map_turned_far_ahead_is_learned_with_the_r
         assert not bias.significant
 
 
-def biased_route(route: Route, along_m: float = 10.0, across_m: float = 3.5) -> Route:
-    d = route.xy[-1] - route.xy[0]
-    u = d / np.hypot(*d)
-    return Route(route.xy + along_m * u + across_m * np.array([-u[1], u[0]]), name=route.name)
-
-
 @pytest.mark.slow
 def test_the_multi_tunnel_on_a_biased_map_refines_the_bias_between_tunnels() -> None:
     inp = open_inputs(SAMPLES / "multi_tunnel.mcap", SAMPLES / "multi_tunnel.route.geojson")
     assert inp.route is not None
-    moved = dataclasses.replace(inp, route=biased_route(inp.route))
+    moved = dataclasses.replace(inp, route=moved_route(inp.route))
     rmse = {}
     for refine_on in (True, False):
         p = with_values(Params(), {"offset.map_bias_refine": refine_on})

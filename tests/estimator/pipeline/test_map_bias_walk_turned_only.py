@@ -13,15 +13,9 @@ import pytest
 from estimator.evaluation.metrics import method_metrics
 from estimator.params import Params, with_values
 from estimator.pipeline import open_inputs, run_methods
-from estimator.route import Route
+from estimator.sim.stress import moved_route
 
 SAMPLES = Path(__file__).resolve().parents[3] / "sample_logs"
-
-
-def _moved(route: Route, along_m: float = 10.0, across_m: float = 3.5) -> Route:
-    d = route.xy[-1] - route.xy[0]
-    u = d / np.hypot(*d)
-    return Route(route.xy + along_m * u + across_m * np.array([-u[1], u[0]]), name=route.name)
 
 
 @pytest.mark.slow
@@ -33,7 +27,7 @@ def test_the_long_tunnel_bends_refine_an_unwalked_bias() -> None:
     what the right map gives (2 m); with it the bend moves the bias the wrong way."""
     inp = open_inputs(SAMPLES / "long_tunnel.mcap", SAMPLES / "long_tunnel.route.geojson")
     assert inp.route is not None
-    moved = dataclasses.replace(inp, route=_moved(inp.route))
+    moved = dataclasses.replace(inp, route=moved_route(inp.route))
     shift = moved.route.xy[0] - inp.route.xy[0]  # type: ignore[union-attr]
     rmse, along_err = {}, {}
     for on in (True, False):

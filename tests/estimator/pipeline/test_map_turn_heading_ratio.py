@@ -7,21 +7,13 @@ from __future__ import annotations
 import dataclasses
 from pathlib import Path
 
-import numpy as np
-
 from estimator.evaluation.metrics import method_metrics
 from estimator.params import Params, with_values
 from estimator.pipeline import open_inputs, run_methods
-from estimator.route import Route
+from estimator.sim.stress import moved_route
 
 SAMPLES = Path(__file__).resolve().parents[3] / "sample_logs"
 KEY = "offset.map_turn_min_heading_ratio"
-
-
-def _moved(route: Route, along_m: float = 10.0, across_m: float = 3.5) -> Route:
-    d = route.xy[-1] - route.xy[0]
-    u = d / np.hypot(*d)
-    return Route(route.xy + along_m * u + across_m * np.array([-u[1], u[0]]), name=route.name)
 
 
 def test_an_unturned_map_moved_is_not_turned_by_the_heading_drift() -> None:
@@ -30,7 +22,7 @@ def test_an_unturned_map_moved_is_not_turned_by_the_heading_drift() -> None:
     portal (0.145 deg). Estimated, the matches learn the heading's drift as the map's rotation."""
     inp = open_inputs(SAMPLES / "monaco_tunnel.mcap", SAMPLES / "monaco_tunnel.route.geojson")
     assert inp.route is not None
-    moved = dataclasses.replace(inp, route=_moved(inp.route))
+    moved = dataclasses.replace(inp, route=moved_route(inp.route))
     rmse, turns = {}, {}
     for ratio in (Params().offset.map_turn_min_heading_ratio, 0.0):
         runs = run_methods(moved, with_values(Params(), {KEY: ratio}))
