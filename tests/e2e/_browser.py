@@ -59,3 +59,24 @@ def served(log: Path | None = None, route: Path | None = None, **options):
         app.close()
         controller.close()
         server.stop()
+
+
+def session_page(browser, server, app, viewport):
+    """A page on the served session once its status line is up, and the app's view of it."""
+    page = browser.new_page(viewport=viewport)
+    page.set_default_timeout(90_000)
+    page.goto(f"http://127.0.0.1:{server.get_port()}")
+    wait_until(lambda: "match attempts" in page.inner_text("body"), 60, "the session")
+    view = wait_until(lambda: app.views(), 10, "the page's view")[0]
+    return page, view
+
+
+def panel_screenshot(page, path: Path) -> None:
+    """The page with the legend folded (the gate table shows below it) and no notices (the
+    "software WebGL" one) over it."""
+    page.get_by_text("Legend").first.click()
+    close = page.locator(".mantine-Notification-closeButton")
+    for k in range(close.count()):
+        close.nth(k).dispatch_event("click")
+    time.sleep(2.0)
+    page.screenshot(path=str(path))

@@ -9,11 +9,10 @@ from __future__ import annotations
 import os
 import re
 import shutil
-import time
 from pathlib import Path
 
 import pytest
-from _browser import served, wait_until
+from _browser import panel_screenshot, served, session_page, wait_until
 
 from estimator.results import Gate
 from inspector.app.match import UNDONE_HERE
@@ -46,11 +45,7 @@ def test_undone_route_updates_on_the_page(browser, tmp_path):
         u = undone[0]
         at_s = float(controller.session.timeline.match_t[u])
 
-        page = browser.new_page(viewport=VIEWPORT)
-        page.set_default_timeout(90_000)
-        page.goto(f"http://127.0.0.1:{server.get_port()}")
-        wait_until(lambda: "match attempts" in page.inner_text("body"), 60, "the session")
-        view = wait_until(lambda: app.views(), 10, "the page's view")[0]
+        page, view = session_page(browser, server, app, VIEWPORT)
         status = page.inner_text("body")
         assert f"route updates undone at {at_s:.1f} s" in status, status[:1500]
         assert "warning about this log and its run" in status
@@ -72,13 +67,8 @@ def test_undone_route_updates_on_the_page(browser, tmp_path):
         assert (
             view.layers.layers["match"]._handles["label"].text.endswith("rejected: dr_separation")
         )
-        page.get_by_text("Legend").first.click()  # folded: the gate table shows below
-        close = page.locator(".mantine-Notification-closeButton")
-        for k in range(close.count()):
-            close.nth(k).dispatch_event("click")  # the "software WebGL" notice
-        time.sleep(2.0)
         shot = tmp_path / "dr_separation.png"
-        page.screenshot(path=str(shot))
+        panel_screenshot(page, shot)
 
         rejected.click()
         wait_until(lambda: _attempt(page) > u, 20, "a later attempt")

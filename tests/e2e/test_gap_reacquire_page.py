@@ -10,11 +10,10 @@ from __future__ import annotations
 import os
 import re
 import shutil
-import time
 from pathlib import Path
 
 import pytest
-from _browser import served, wait_until
+from _browser import panel_screenshot, served, session_page, wait_until
 
 from inspector.cli.main import main
 
@@ -35,11 +34,7 @@ def test_re_acquired_heading_on_the_page(browser, tmp_path):
         assert m.accepted and m.reanchored and m.failed_gates
         t_match = float(session.timeline.match_t[i])
 
-        page = browser.new_page(viewport=VIEWPORT)
-        page.set_default_timeout(90_000)
-        page.goto(f"http://127.0.0.1:{server.get_port()}")
-        wait_until(lambda: "match attempts" in page.inner_text("body"), 60, "the session")
-        view = wait_until(lambda: app.views(), 10, "the page's view")[0]
+        page, view = session_page(browser, server, app, VIEWPORT)
         status = page.inner_text("body")
         assert f"heading re-acquired from the route at {t_match:.1f} s" in status, status[:1500]
 
@@ -50,13 +45,8 @@ def test_re_acquired_heading_on_the_page(browser, tmp_path):
         assert "ACCEPTED (re-anchored)" in text, text[:3000]
         assert re.search(r"rotation\s+[\d.]+\s+<= 15\.000\s+✗ FAILED", text), text[:3000]
         assert "the IMU gap that ended at" in text and "deg here)" in text
-        page.get_by_text("Legend").first.click()
-        close = page.locator(".mantine-Notification-closeButton")
-        for k in range(close.count()):
-            close.nth(k).dispatch_event("click")
-        time.sleep(2.0)
         shot = tmp_path / "gap_reacquire.png"
-        page.screenshot(path=str(shot))
+        panel_screenshot(page, shot)
         page.close()
     if os.environ.get("ROUTEFUSE_UPDATE_SCREENSHOT") == "1":
         shutil.move(shot, REPO / "docs" / "gap_reacquire.png")
