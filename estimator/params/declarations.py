@@ -581,7 +581,7 @@ class ExtensionParams:
         "evidence that the map is exact",
     )
     map_bias_keep_applied: bool = param(
-        False,
+        True,
         "a map bias applied in the previous outage is carried to the next (refined by the "
         "GNSS-good driving in between) unless the bias learned afresh from that driving is "
         "significant itself: a short stretch that cannot tell the map's bias from zero is no "
