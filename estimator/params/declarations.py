@@ -609,6 +609,14 @@ class ExtensionParams:
         "second moment less its own covariance): a test that fails to reject zero is no "
         "evidence that the map is exact",
     )
+    map_bias_keep_applied: bool = param(
+        True,
+        "a map bias applied in the previous outage is carried to the next (refined by the "
+        "GNSS-good driving in between) unless the bias learned afresh from that driving is "
+        "significant itself: a short stretch that cannot tell the map's bias from zero is no "
+        "evidence against the one a longer approach established, and the applied-or-not "
+        "decision would otherwise flip on small changes of the stretch",
+    )
     dr_separation: bool = param(
         True,
         "run a dead-reckoning twin of the filter through each outage (no route updates) and, "

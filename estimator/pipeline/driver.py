@@ -505,8 +505,15 @@ class Driver:
         if self.p.extensions.map_bias:
             track = self._bias_track(rows, last)
             tr.bias = self._learn_bias(track, s_last)
-            if previous is not None and not np.isfinite(tr.bias.chi2):
-                # too little driving since the previous outage to learn: its bias still holds
+            if previous is not None and (
+                not np.isfinite(tr.bias.chi2)
+                or (
+                    self.p.extensions.map_bias_keep_applied
+                    and keeps_carried(previous[0], tr.bias)
+                )
+            ):
+                # too little driving since the previous outage to learn, or too little to
+                # overturn the bias it applied: its bias still holds
                 bias, offset, pivot_dist = previous
                 normal = self.route.normal_at(np.array([tr.s]))[0]
                 if bias.significant:
@@ -984,6 +991,18 @@ def _track_var(track: F64) -> F64:
     """Each point's own horizontal variance per axis (the mean of E and N)."""
     var: F64 = 0.5 * np.sum(track[:, O_SIG_POS : O_SIG_POS + 2] ** 2, axis=1)
     return var
+
+
+def keeps_carried(previous: MapBias, fresh: MapBias) -> bool:
+    """Whether the bias ``previous`` applied in the last outage is carried to this one (and
+    refined by the driving since) rather than replaced by ``fresh``, learned from that driving
+    alone (``extensions.map_bias_keep_applied``). A ``fresh`` bias that fails the significance
+    test only fails to tell the map's bias from zero on a stretch often far shorter than the
+    approach the previous one was learned on: no evidence against that bias, which the refine
+    weighs against the same stretch. Replacing it would make the applied-or-not decision of
+    every later outage flip with small changes of that stretch. A ``fresh`` bias refused as
+    another road's (or with a lane beyond the road) stands."""
+    return previous.significant and not fresh.significant and fresh.refused is None
 
 
 def honest_turn_consider(bias: MapBias | None, var: float) -> float:
