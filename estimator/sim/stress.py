@@ -25,6 +25,7 @@ from estimator.nav.frames import LocalFrame
 from estimator.pipeline.inputs import Inputs
 from estimator.route import Route
 from estimator.sim.scenarios import get_scenario
+from estimator.sim.sensors import ImuErrors
 from estimator.sim.simulation import Progress, simulate
 
 Fault = Literal[
@@ -104,6 +105,10 @@ class Drive:
     """the route as the road really is (for the route-relative figures, reported apart)"""
     tunnels: tuple[tuple[float, float], ...]
     """GNSS outages of the drive, log time"""
+    imu_errors: ImuErrors | None = None
+    """the IMU errors the simulator drew (what a calibration is checked against)"""
+    imu_t: np.ndarray | None = None
+    """the simulated IMU stamps ``imu_errors``' rows are at (an IMU gap cuts the log's)"""
 
     def route_geojson(self) -> dict[str, Any]:
         """The drive's route file (biased or a trap, as drawn), its spec in the properties;
@@ -145,7 +150,7 @@ def build(spec: DriveSpec, *, progress: Progress | None = None) -> Drive:
         route = Route(route.xy + PARALLEL_SHIFT_M * _left_of(route), name=route.name)
     elif spec.fault == "reversed_route":
         route = Route(route.xy[::-1], name=route.name)
-    return Drive(spec, Inputs(log, route, sim.frame), road, sim.tunnels)
+    return Drive(spec, Inputs(log, route, sim.frame), road, sim.tunnels, sim.imu_errors, sim.imu.t)
 
 
 def _direction(route: Route) -> np.ndarray:
