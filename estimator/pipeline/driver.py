@@ -899,6 +899,11 @@ class Driver:
         widen_to_innovation(f.P, y, position_on_map_cov(f.P) + applied_obs_cov(rec, self.p))
         return dataclasses.replace(rec, accepted=True, reanchored=True)
 
+    def after_gap(self, t: float) -> bool:
+        """Whether an IMU gap ended in the current outage by ``t``."""
+        ends = self.gap_ends
+        return bool(np.any((ends > self.track.t_start) & (ends <= t)))
+
     def _reacquired(self, rec: MatchRecord) -> MatchRecord:
         """``rec`` accepted as a re-anchor after an IMU gap in this outage
         (``extensions.gap_reacquire``), or ``rec`` itself. The wheels carried the position

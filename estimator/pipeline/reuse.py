@@ -199,6 +199,7 @@ def resume(d: Driver, old: ReuseState, old_params: Params, *, reuse_matching: bo
         and p.extensions.map_turn_consider == old_params.extensions.map_turn_consider
         and p.extensions.map_turn_estimate == old_params.extensions.map_turn_estimate
         and p.extensions.reanchor == old_params.extensions.reanchor
+        and p.extensions.gap_reacquire == old_params.extensions.gap_reacquire
         and p.extensions.calibrated_approach == old_params.extensions.calibrated_approach
         and p.extensions.dr_separation == old_params.extensions.dr_separation
         and (
@@ -207,7 +208,7 @@ def resume(d: Driver, old: ReuseState, old_params: Params, *, reuse_matching: bo
             == (old_params.gates.dr_separation_chi2, old_params.gates.dr_separation_floor_m)
         )
         and (
-            not p.extensions.reanchor
+            not (p.extensions.reanchor or p.extensions.gap_reacquire)
             or (p.gates.reanchor_after, p.gates.reanchor_gyro_bias_deg_s)
             == (old_params.gates.reanchor_after, old_params.gates.reanchor_gyro_bias_deg_s)
         )
@@ -246,7 +247,11 @@ def _replay_attempts(d: Driver, old: ReuseState) -> None:
         rec = d.match(old.out, cp.n_out, x, P, aux)
         prev = old.records[cp.n_records]
         # whether a refusal re-anchors depends on the live filter: judged live from there
-        may_reanchor = d.p.extensions.reanchor and blames_the_filter(rec, d.p)
+        may_reanchor = (d.p.extensions.reanchor and blames_the_filter(rec, d.p)) or (
+            d.p.extensions.gap_reacquire
+            and d.after_gap(rec.t)
+            and blames_the_filter(rec, d.p, after_gap=True)
+        )
         separation = [g for g in prev.gates if g.gate is Gate.DR_SEPARATION]
         # an update the twin's gate undid, or one after it, was judged on the live filter
         if not same_outcome(rec, prev) or may_reanchor or not all(g.passed for g in separation):

@@ -12,7 +12,7 @@ import pytest
 
 from estimator.evaluation.metrics import deviation_series
 from estimator.params import Params, with_values
-from estimator.pipeline import run_methods
+from estimator.pipeline import run, run_methods
 from estimator.results import Run
 from estimator.sim.stress import Drive, build, drive_spec
 
@@ -71,3 +71,21 @@ def test_the_re_acquisition_is_named(runs: dict[str, Run]) -> None:
     (line,) = [w for w in runs["proposed"].warnings if w.startswith("heading re-acquired")]
     assert "after the IMU gap that ended at 294." in line
     assert not any(w.startswith("heading re-acquired") for w in runs["off"].warnings)
+
+
+@pytest.mark.parametrize("before", [False, True], ids=["switched on", "switched off"])
+def test_a_re_run_with_the_switch_flipped_is_a_fresh_run(drive: Drive, before: bool) -> None:
+    """The inspector re-runs from the first attempt whose outcome changes: a re-acquisition
+    depends on the attempts before it, so flipping the switch must re-run from the first one
+    after the gap that could re-anchor, not copy the old refusals."""
+    inp = drive.inputs
+
+    def params(on: bool) -> Params:
+        return with_values(Params(), {"extensions.gap_reacquire": on})
+
+    old = run(inp.log, inp.route, params(before), frame=inp.frame)
+    reused = run(inp.log, inp.route, params(not before), frame=inp.frame, reuse=old)
+    fresh = run(inp.log, inp.route, params(not before), frame=inp.frame)
+    np.testing.assert_array_equal(reused.epochs.position, fresh.epochs.position)
+    assert [m.accepted for m in reused.matches] == [m.accepted for m in fresh.matches]
+    assert any(m.reanchored for m in fresh.matches) == (not before)
