@@ -60,7 +60,7 @@ from estimator.filter.layout import (
 from estimator.filter.portal import advance_to_outage
 from estimator.filter.propagation import flush_covariance
 from estimator.filter.route_update import applied_obs_cov, apply_route_match
-from estimator.filter.setup import FilterInputs, prepare_inputs
+from estimator.filter.setup import FilterInputs, prepare_inputs, route_errors_estimated
 from estimator.filter.twin import DeadReckoningTwin, Undone
 from estimator.filter.updates import (
     clone_lane_offset,
@@ -140,6 +140,10 @@ def run(
     key = filter_key(p)
     old = reusable_state(reuse, log, route, frame, outages_t, key)
     inputs = old.inputs if old is not None else prepare_inputs(log, p, frame, outages_t)
+    if inputs.cfg[C_ROUTE_EST] != route_errors_estimated(p):
+        cfg = inputs.cfg.copy()
+        cfg[C_ROUTE_EST] = route_errors_estimated(p)
+        inputs = dataclasses.replace(inputs, cfg=cfg)
     memo = Memo(None if old is None else old.memo)
     driver = Driver(log, route, p, matching, inputs, progress, memo)
     if old is not None and reuse is not None:
@@ -396,23 +400,10 @@ class Driver:
                     self.checkpoints[-1] = cp
                     continue
                 self.begin_interval(a, f.out, f.n_out, f.x, f.aux)
-                bias = self.track.bias
-                if bias is not None:
-                    gain, cov = bias.gain.copy(), bias.cov.copy()
-                    if not self.p.extensions.lane_offset_state:
-                        gain[0], cov[0], cov[:, 0] = 0.0, 0.0, 0.0
-                    clone_route_errors(f.P, f.aux, self.inp.cfg, gain, cov, bias.significant)
-                elif self.p.extensions.lane_offset_state and self.track.s is not None:
-                    t = self.route.tangent_at(self.track.s)[0]
-                    clone_lane_offset(f.P, f.aux, self.inp.cfg, np.array([-t[1], t[0]]))
-                ext = self.p.extensions
-                turn = ext.map_turn_consider
-                var = bias.turn_var if bias is not None and turn else 0.0
-                estimate = turn and ext.map_turn_estimate and self._turn_estimated(bias, var)
-                if turn and not estimate and ext.map_turn_honest_consider:
-                    var = honest_turn_consider(bias, var)
-                clone_map_turn(f.P, f.aux, f.x, var, estimate)
-                if ext.dr_separation:
+                self.clone_route_errors(f.x, f.P, f.aux)
+                cloned = (f.P.copy(), f.aux.copy())
+                self.checkpoints[-1] = dataclasses.replace(self.checkpoints[-1], cloned=cloned)
+                if self.p.extensions.dr_separation:
                     self.twin = DeadReckoningTwin(f.snapshot(), self.inp, fixes_until=a)
             while True:
                 t_try = a + tr.min_outage_s + k * tr.interval_s
@@ -434,6 +425,26 @@ class Driver:
                 k += 1
             at = None
         f.advance(math.inf)
+
+    def clone_route_errors(self, x: F64, P: F64, aux: F64) -> None:
+        """At an outage's start (after :meth:`begin_interval`): the lane-offset, map-bias and
+        map-rotation errors the outage's pseudo-positions share, cloned into the filter."""
+        bias = self.track.bias
+        if bias is not None:
+            gain, cov = bias.gain.copy(), bias.cov.copy()
+            if not self.p.extensions.lane_offset_state:
+                gain[0], cov[0], cov[:, 0] = 0.0, 0.0, 0.0
+            clone_route_errors(P, aux, self.inp.cfg, gain, cov, bias.significant)
+        elif self.p.extensions.lane_offset_state and self.track.s is not None:
+            t = self.route.tangent_at(self.track.s)[0]
+            clone_lane_offset(P, aux, self.inp.cfg, np.array([-t[1], t[0]]))
+        ext = self.p.extensions
+        turn = ext.map_turn_consider
+        var = bias.turn_var if bias is not None and turn else 0.0
+        estimate = turn and ext.map_turn_estimate and self._turn_estimated(bias, var)
+        if turn and not estimate and ext.map_turn_honest_consider:
+            var = honest_turn_consider(bias, var)
+        clone_map_turn(P, aux, x, var, estimate)
 
     def _bias_growth(self, d: float, dist_last: float, dist_a: float) -> float:
         """Variance (m^2, per axis) an applied map bias's error gains from the previous attempt
@@ -507,10 +518,7 @@ class Driver:
             tr.bias = self._learn_bias(track, s_last)
             if previous is not None and (
                 not np.isfinite(tr.bias.chi2)
-                or (
-                    self.p.extensions.map_bias_keep_applied
-                    and keeps_carried(previous[0], tr.bias)
-                )
+                or (self.p.extensions.map_bias_keep_applied and keeps_carried(previous[0], tr.bias))
             ):
                 # too little driving since the previous outage to learn, or too little to
                 # overturn the bias it applied: its bias still holds

@@ -56,6 +56,9 @@ class Checkpoint:
     uncalibrated_m: float | None = None
     """an outage left to dead reckoning (``extensions.calibrated_approach``): the driving with
     GNSS before it, m"""
+    cloned: tuple[F64, F64] | None = None
+    """an outage's P and aux once the route's errors were cloned into them at its start (what
+    the map bias, the lane and the map's rotation learned before it gave)"""
 
     @property
     def n_out(self) -> int:
@@ -179,6 +182,7 @@ def same_outcome(new: MatchRecord, old: MatchRecord) -> bool:
         and new.rotation_rad == old.rotation_rad
         and new.n_pairs == old.n_pairs
         and new.residual_m == old.residual_m
+        and new.along_observed == old.along_observed
     )
 
 
@@ -191,6 +195,7 @@ def resume(d: Driver, old: ReuseState, old_params: Params, *, reuse_matching: bo
     outage_cps = [c for c in old.checkpoints if c.kind == "outage"]
     same_trigger = (
         p.trigger == old_params.trigger
+        and p.window.spacing_m == old_params.window.spacing_m
         and p.extensions.heading_observation == old_params.extensions.heading_observation
         and p.extensions.lane_offset_state == old_params.extensions.lane_offset_state
         and p.extensions.map_bias == old_params.extensions.map_bias
@@ -198,6 +203,11 @@ def resume(d: Driver, old: ReuseState, old_params: Params, *, reuse_matching: bo
         and p.extensions.map_bias_keep_applied == old_params.extensions.map_bias_keep_applied
         and p.extensions.map_turn_consider == old_params.extensions.map_turn_consider
         and p.extensions.map_turn_estimate == old_params.extensions.map_turn_estimate
+        and p.extensions.map_turn_two_places == old_params.extensions.map_turn_two_places
+        and p.extensions.map_turn_honest_consider == old_params.extensions.map_turn_honest_consider
+        and p.extensions.geometry_covariance == old_params.extensions.geometry_covariance
+        and p.extensions.weak_along_track == old_params.extensions.weak_along_track
+        and p.pseudo.weak_along_disagreement == old_params.pseudo.weak_along_disagreement
         and p.extensions.reanchor == old_params.extensions.reanchor
         and p.extensions.gap_reacquire == old_params.extensions.gap_reacquire
         and p.extensions.calibrated_approach == old_params.extensions.calibrated_approach
@@ -237,8 +247,20 @@ def _replay_attempts(d: Driver, old: ReuseState) -> None:
         x, P0, aux0, _ = cp.state
         if cp.kind == "outage":
             if cp.uncalibrated_m is None:
+                track = dataclasses.replace(d.track)
                 a = d.inp.degraded[cp.interval][0]
                 d.begin_interval(a, old.out, cp.n_out, x, aux0)
+                P, aux = P0.copy(), aux0.copy()
+                d.clone_route_errors(x.copy(), P, aux)
+                if cp.cloned is not None and not (
+                    np.array_equal(P, cp.cloned[0]) and np.array_equal(aux, cp.cloned[1])
+                ):
+                    # what was learned before the outage changed (the map bias's fit reads
+                    # the window and shape parameters too): the outage runs live from its start
+                    d.track = track
+                    _restart(d, old, cp, n_cp, records)
+                    d.loop(cp.interval, None)
+                    return
             continue
         P = P0.copy()
         aux = aux0.copy()
