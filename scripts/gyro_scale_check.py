@@ -59,9 +59,7 @@ def _at_starts(drive: object, on: bool) -> list[tuple[float, float, float, float
     p = for_method(with_values(Params(), {"extensions.gyro_scale_state": on}), "baseline")
     inp = prepare_inputs(log, p, drive.inputs.frame, ())
     f = Filter(inp, source=log.path, t_start=log.t_start)
-    f.alloc(4000)
-    f.write_row()
-    f.aux[layout.A_NEXT_OUT] = f.aux[layout.A_TIME] + inp.cfg[layout.C_OUT_DT]
+    f.start(4000)
     rows = []
     for a, _ in drive.tunnels:
         f.advance(a)

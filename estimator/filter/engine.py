@@ -14,10 +14,12 @@ from estimator.filter.kernel import run_until, write_row
 from estimator.filter.layout import (
     A_DIST,
     A_INFLATE,
+    A_NEXT_OUT,
     A_REJECT_SINCE,
     A_TIME,
     A_TRUST_T,
     A_USED_DIST,
+    C_OUT_DT,
     E_ATT,
     E_POS,
     I_IMU,
@@ -97,6 +99,14 @@ class Filter:
 
     def alloc(self, n_rows: int) -> None:
         self.out = np.zeros((n_rows, NO))
+
+    def start(self, n_rows: int) -> None:
+        """From the initial state: room for ``n_rows`` output rows, the first written and the
+        next one due an output interval later."""
+        self.set_state((self.inp.x0, self.inp.P0, self.inp.aux0, self.inp.idx0))
+        self.alloc(n_rows)
+        self.write_row()
+        self.aux[A_NEXT_OUT] = self.aux[A_TIME] + self.inp.cfg[C_OUT_DT]
 
     def grow(self) -> None:
         self.out = np.vstack([self.out, np.zeros((len(self.out) // 2 + 16, NO))])

@@ -35,14 +35,12 @@ from estimator.filter.kernel import IMU_GAP_S, finite_state
 from estimator.filter.layout import (
     A_DIST,
     A_DR,
-    A_NEXT_OUT,
     A_ROT,
     A_ROT_EST,
     A_ROT_SHIFT,
     A_ROUTE,
     A_TIME,
     A_USED_DIST,
-    C_OUT_DT,
     C_ROUTE_EST,
     E_ATT,
     E_MAP,
@@ -356,11 +354,7 @@ class Driver:
         return self._route
 
     def start(self) -> None:
-        f = self.filt
-        f.set_state((self.inp.x0, self.inp.P0, self.inp.aux0, self.inp.idx0))
-        f.alloc(self._rows_needed())
-        f.write_row()
-        f.aux[A_NEXT_OUT] = f.aux[A_TIME] + self.inp.cfg[C_OUT_DT]
+        self.filt.start(self._rows_needed())
         self.loop(0, None)
 
     def _rows_needed(self) -> int:

@@ -31,9 +31,7 @@ def _final_state(seed: int, values: dict[str, bool]) -> tuple[float, float, floa
     p = with_values(Params(), values)
     inp = prepare_inputs(log, p, sim.frame, ())
     f = Filter(inp, source=log.path, t_start=log.t_start)
-    f.alloc(4000)
-    f.write_row()
-    f.aux[layout.A_NEXT_OUT] = f.aux[layout.A_TIME] + inp.cfg[layout.C_OUT_DT]
+    f.start(4000)
     f.advance(math.inf)
     sigma = math.sqrt(max(f.P[layout.E_GSF, layout.E_GSF], 0.0))
     return float(sim.imu_errors.gyro_scale[2]), float(f.x[layout.X_GSF]), sigma
@@ -81,9 +79,7 @@ def _at_entry(index: int, on: bool) -> tuple[Filter, float, float]:
     p = for_method(with_values(Params(), {"extensions.gyro_scale_state": on}), "baseline")
     inp = prepare_inputs(log, p, drive.inputs.frame, ())
     f = Filter(inp, source=log.path, t_start=log.t_start)
-    f.alloc(4000)
-    f.write_row()
-    f.aux[layout.A_NEXT_OUT] = f.aux[layout.A_TIME] + inp.cfg[layout.C_OUT_DT]
+    f.start(4000)
     a, b = drive.tunnels[0]
     f.advance(a)
     return f, a, b

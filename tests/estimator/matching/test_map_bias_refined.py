@@ -17,6 +17,7 @@ from estimator.params import Params, with_values
 from estimator.pipeline import open_inputs, run_methods
 from estimator.route import Route
 from estimator.sim.stress import moved_route
+from tests.estimator._map_biases import map_bias
 
 SAMPLES = Path(__file__).resolve().parents[3] / "sample_logs"
 P = Params()
@@ -35,16 +36,11 @@ def carried(offset: np.ndarray, pivot: np.ndarray, sigma: float) -> MapBias:
     """A significant bias as :func:`estimator.matching.map_bias.carried_bias` hands it on."""
     cov = np.zeros((3, 3))
     cov[1:, 1:] = sigma**2 * np.eye(2)
-    gain = np.zeros((3, 2))
-    return MapBias(
-        offset=offset,
-        rotation=0.0,
-        rotation_sigma=0.0,
+    return map_bias(
+        offset,
         pivot=pivot,
         lane=0.0,
-        gain=gain,
         cov=cov,
-        measured=offset,
         measured_cov=cov[1:, 1:],
         chi2=99.0,
         along_observed=True,

@@ -11,6 +11,7 @@ import numpy as np
 from estimator.matching.map_bias import MapBias, carried_bias, refined_bias
 from estimator.params import Params, with_values
 from estimator.route import Route
+from tests.estimator._map_biases import map_bias
 
 P = with_values(Params(), {"extensions.map_turn_two_places": True})
 GNSS_COV = np.eye(2) * 0.25
@@ -36,15 +37,10 @@ def first_place(shift: np.ndarray, pivot: np.ndarray, params: Params) -> MapBias
     """The bias learned at ``pivot``: the shift right to 1.5 m, the rotation not told from zero
     (0.15 +- 0.14 deg fitted, so its honest second moment), carried 2.35 km on."""
     cov = 1.5**2 * np.eye(2)
-    learned = MapBias(
-        offset=shift,
-        rotation=0.0,
-        rotation_sigma=0.0,
+    learned = map_bias(
+        shift,
         pivot=pivot,
         lane=0.0,
-        gain=np.zeros((3, 2)),
-        cov=np.zeros((3, 3)),
-        measured=shift,
         measured_cov=cov,
         chi2=99.0,
         along_observed=True,

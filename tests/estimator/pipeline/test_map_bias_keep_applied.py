@@ -15,25 +15,14 @@ from estimator.params import Params, with_values
 from estimator.pipeline import run_methods
 from estimator.pipeline.driver import keeps_carried
 from estimator.sim.stress import build, drive_spec
+from tests.estimator._map_biases import map_bias
 
 GSF = "extensions.gyro_scale_state"
 KEEP = "extensions.map_bias_keep_applied"
 
 
 def _bias(offset: tuple[float, float], *, chi2: float) -> MapBias:
-    return MapBias(
-        offset=np.array(offset),
-        rotation=0.0,
-        rotation_sigma=0.0,
-        pivot=np.zeros(2),
-        lane=-1.75,
-        gain=np.zeros((3, 2)),
-        cov=np.zeros((3, 3)),
-        measured=np.array([4.0, -3.0]),
-        measured_cov=np.eye(2) * 9.0,
-        chi2=chi2,
-        along_observed=False,
-    )
+    return map_bias(offset, measured=np.array([4.0, -3.0]), measured_cov=np.eye(2) * 9.0, chi2=chi2)
 
 
 def test_an_applied_bias_is_kept_against_an_insignificant_fresh_one() -> None:

@@ -13,24 +13,13 @@ from estimator.params import Params, with_values
 from estimator.pipeline import run_methods
 from estimator.pipeline.driver import unapplied_considered
 from estimator.sim.stress import build, drive_spec
+from tests.estimator._map_biases import map_bias
 
 CHI2_2DOF_95 = 5.991
 
 
 def _bias(offset: tuple[float, float], measured: tuple[float, float]) -> MapBias:
-    return MapBias(
-        offset=np.array(offset),
-        rotation=0.0,
-        rotation_sigma=0.0,
-        pivot=np.zeros(2),
-        lane=-1.75,
-        gain=np.zeros((3, 2)),
-        cov=np.diag([0.1, 0.0, 0.0]),
-        measured=np.array(measured),
-        measured_cov=np.eye(2),
-        chi2=6.0,
-        along_observed=False,
-    )
+    return map_bias(offset, cov=np.diag([0.1, 0.0, 0.0]), measured=np.array(measured), chi2=6.0)
 
 
 def test_an_unapplied_bias_is_carried_as_map_error() -> None:
