@@ -71,8 +71,9 @@ I64 = NDArray[np.int64]
 IMU_GAP_S = 5.0
 """An IMU interval longer than this (a logging gap) is not integrated: rates held for minutes
 turn the attitude into noise. Where the wheel speed covers the gap, the position is carried
-along the last heading by the distance the wheels measured (:func:`_bridge`); the next fix
-widens the position covariance to cover wherever the vehicle went meanwhile."""
+along the last heading by the distance the wheels measured (:func:`_bridge`; on a log without
+wheel speed, by the last velocity); the next fix widens the position covariance to cover
+wherever the vehicle went meanwhile."""
 GAP_VEL_VAR = 5.0**2
 GAP_YAW_VAR = (math.pi / 4) ** 2
 """Velocity and yaw variance added across a logging gap: the vehicle may have turned."""
@@ -230,37 +231,54 @@ def _bridge(x: F64, P: F64, aux: F64, t: float, wheel_t: F64, wheel_v: F64) -> N
     """Across an IMU gap the wheels still measured how far the vehicle went: move the position
     that distance along the last horizontal velocity's direction (and the DR track with it),
     set the speed to the wheels' at the gap's end, and add to the position variance what a
-    road turning anywhere in the gap could put it off, half the distance each way. Without
-    wheel samples over the whole gap (none more than 1 s apart) the position is held."""
-    t0 = aux[A_TIME]
-    a = np.searchsorted(wheel_t, t0)
-    b = np.searchsorted(wheel_t, t)
-    if a == 0 or b >= wheel_t.shape[0] or b <= a:
-        return
-    dist = 0.0
-    for j in range(a - 1, b):
-        if wheel_t[j + 1] - wheel_t[j] > 1.0:
-            return
-        lo = max(wheel_t[j], t0)
-        hi = min(wheel_t[j + 1], t)
-        if hi > lo:
-            dist += 0.5 * abs(wheel_v[j] + wheel_v[j + 1]) * (hi - lo)
+    road turning anywhere in the gap could put it off, half the distance each way. On a log
+    without wheel speed the last velocity carries it instead, and the variance adds the
+    speed's own uncertainty over the gap (:data:`GAP_VEL_VAR`): held, the position would stay
+    behind by the whole gap's travel while claiming the sigma it had before it. Where the
+    log's wheels fall silent with the IMU (the recording paused), and for a vehicle standing
+    still, the position is held; the next fix re-places it."""
     speed = math.hypot(x[X_VEL], x[X_VEL + 1])
     if speed < 0.1:
         return
+    t0 = aux[A_TIME]
+    dist, v_end = _wheel_distance(t0, t, wheel_t, wheel_v)
+    var = 0.0
+    if dist < 0.0:
+        if wheel_t.shape[0] > 0:
+            return
+        dist, v_end = speed * (t - t0), speed
+        var = GAP_VEL_VAR * (t - t0) ** 2
     ue, un = x[X_VEL] / speed, x[X_VEL + 1] / speed
     x[X_POS] += ue * dist
     x[X_POS + 1] += un * dist
     aux[A_DR] += ue * dist
     aux[A_DR + 1] += un * dist
     aux[A_DIST] += dist
-    f = (t - wheel_t[b - 1]) / max(wheel_t[b] - wheel_t[b - 1], 1e-9)
-    v_end = abs(wheel_v[b - 1] + f * (wheel_v[b] - wheel_v[b - 1]))
     x[X_VEL] = ue * v_end
     x[X_VEL + 1] = un * v_end
-    var = (0.5 * dist) ** 2
+    var += (0.5 * dist) ** 2
     P[E_POS, E_POS] += var
     P[E_POS + 1, E_POS + 1] += var
+
+
+@kernel
+def _wheel_distance(t0: float, t: float, wheel_t: F64, wheel_v: F64) -> tuple[float, float]:
+    """(distance, speed at ``t``) the wheels measured from ``t0`` to ``t``, or (-1, 0) where
+    their samples do not cover it (none, or two more than 1 s apart)."""
+    a = np.searchsorted(wheel_t, t0)
+    b = np.searchsorted(wheel_t, t)
+    if a == 0 or b >= wheel_t.shape[0] or b <= a:
+        return -1.0, 0.0
+    dist = 0.0
+    for j in range(a - 1, b):
+        if wheel_t[j + 1] - wheel_t[j] > 1.0:
+            return -1.0, 0.0
+        lo = max(wheel_t[j], t0)
+        hi = min(wheel_t[j + 1], t)
+        if hi > lo:
+            dist += 0.5 * abs(wheel_v[j] + wheel_v[j + 1]) * (hi - lo)
+    f = (t - wheel_t[b - 1]) / max(wheel_t[b] - wheel_t[b - 1], 1e-9)
+    return dist, abs(wheel_v[b - 1] + f * (wheel_v[b] - wheel_v[b - 1]))
 
 
 @kernel

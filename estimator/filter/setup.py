@@ -284,7 +284,11 @@ def imu_gap_warnings(
     afresh after it (at ``realigned``, s) or its heading carried across is left to the fixes
     after it. Beyond :data:`IMU_GAPS_NAMED` gaps, the rest are summed up in one line (their
     span, their total length, the fixes left out, how many were re-aligned)."""
-    bridge = "carried along the wheel speed" if have_wheel else "held (no wheel speed)"
+    bridge = (
+        "carried along the wheel speed"
+        if have_wheel
+        else "carried along the last velocity (no wheel speed; its sigma widened for the speed)"
+    )
     n = len(start)
     named = n if n <= IMU_GAPS_NAMED else IMU_GAPS_NAMED - 1
     lines = []

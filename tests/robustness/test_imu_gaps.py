@@ -50,6 +50,27 @@ def test_a_gap_in_the_tunnel_is_bridged_with_the_wheel_speed(long_tunnel: Inputs
     assert "wheel speed" in note and "; not re-aligned (" in note
 
 
+def test_without_wheel_speed_a_gap_in_the_tunnel_is_carried_not_held(long_tunnel: Inputs) -> None:
+    """30 s without IMU inside the long tunnel on a log without wheel speed: held, the position
+    stayed where the gap began while the vehicle drove on at about 20 m/s, its sigma claiming
+    metres; carried along the last velocity it is close, and its sigma covers the error."""
+    gapped = _without_imu(long_tunnel, 150.0, 180.0)
+    gapped = dataclasses.replace(gapped, log=dataclasses.replace(gapped.log, wheel=None))
+    run = run_methods(gapped, Params(), methods=("baseline",))["baseline"]
+    assert gapped.route is not None
+    truth = deviation_series(run, gapped.route, gapped.log).truth
+    assert truth is not None
+    t = run.epochs.t[truth.index] - gapped.log.t_start
+    after = (t >= 180.5) & (t < 185.0)
+    assert after.any()
+    err = truth.h_err_m[after]
+    sigma = np.hypot(*run.epochs.position_sigma[truth.index][after][:, :2].T)
+    assert err.max() < 100.0  # held: 30 s x ~20 m/s = 600 m behind
+    assert np.all(err < 3.0 * sigma)
+    (note,) = [w for w in run.warnings if w.startswith("IMU gap 150.0-180.0 s")]
+    assert "carried along the last velocity (no wheel speed; " in note
+
+
 def test_fixes_inside_a_gap_are_named_and_left_out(long_tunnel: Inputs) -> None:
     gapped = _without_imu(long_tunnel, 30.0, 90.0)
     run = run_methods(gapped, Params(), methods=("baseline",))["baseline"]
@@ -123,14 +144,16 @@ def test_gap_lines_are_bounded_whatever_the_count(n: int) -> None:
     named = lines if n <= IMU_GAPS_NAMED else lines[:-1]
     for i, line in enumerate(named):
         assert line.startswith(f"IMU gap {start[i]:.1f}-{end[i]:.1f} s: ")
-        assert "held (no wheel speed); 30 fixes inside it not used; " in line
+        assert "carried along the last velocity (no wheel speed; " in line
+        assert "; 30 fixes inside it not used; " in line
         assert ("not re-aligned" in line) == (realigned[i] is None)
     if n > IMU_GAPS_NAMED:
         k = len(named)
         again = sum(r is not None for r in realigned[k:])
         assert lines[-1] == (
             f"... and {n - k} more IMU gaps between {start[k]:.1f} and {end[-1]:.1f} s "
-            f"({float(np.sum(end[k:] - start[k:])):.1f} s in all, the position held (no wheel "
-            f"speed); {30 * (n - k)} fixes inside them not used; {again} re-aligned from the "
+            f"({float(np.sum(end[k:] - start[k:])):.1f} s in all, the position carried along "
+            "the last velocity (no wheel speed; its sigma widened for the speed); "
+            f"{30 * (n - k)} fixes inside them not used; {again} re-aligned from the "
             f"GNSS track, {n - k - again} not)"
         )
