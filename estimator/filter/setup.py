@@ -167,7 +167,8 @@ def prepare_inputs(log: Log, p: Params, frame: LocalFrame, outages: Outages) -> 
             imu_t[gaps + 1] - log.t_start,
             left_out,
             tuple(None if r is None else r.t - log.t_start for r in after_gaps),
-            have_wheel=log.wheel is not None,
+            have_wheel=len(wheel_t) > 0,
+            wheels_silent=tuple(not wheels_cover(wheel_t, imu_t[g], imu_t[g + 1]) for g in gaps),
         )
     )
     realignments = tuple(r for r in after_gaps if r is not None)
@@ -265,6 +266,16 @@ def _realignments(
     return tuple(found)
 
 
+def wheels_cover(wheel_t: F64, t0: float, t1: float) -> bool:
+    """Whether wheel samples cover ``t0``-``t1`` (on both sides, none more than 1 s apart): the
+    kernel then carries the position across an IMU gap there by the wheels' distance."""
+    a = int(np.searchsorted(wheel_t, t0))
+    b = int(np.searchsorted(wheel_t, t1))
+    if a == 0 or b >= len(wheel_t) or b <= a:
+        return False
+    return bool(np.all(np.diff(wheel_t[a - 1 : b + 1]) <= 1.0))
+
+
 IMU_GAPS_NAMED = 5
 """A log with more IMU gaps than this names the first ``IMU_GAPS_NAMED - 1`` and sums the
 rest up in one line: a log cut into thousands of gaps gets a few warning lines, not
@@ -278,17 +289,22 @@ def imu_gap_warnings(
     realigned: tuple[float | None, ...],
     *,
     have_wheel: bool,
+    wheels_silent: tuple[bool, ...] = (),
 ) -> list[str]:
     """One line per IMU gap (``start``-``end``, s after the log start): how the position was
     carried across it, the fixes inside it left out, and whether the filter was aligned
     afresh after it (at ``realigned``, s) or its heading carried across is left to the fixes
     after it. Beyond :data:`IMU_GAPS_NAMED` gaps, the rest are summed up in one line (their
-    span, their total length, the fixes left out, how many were re-aligned)."""
+    span, their total length, the fixes left out, how many were re-aligned). ``wheels_silent``:
+    the gaps the log's wheels fell silent in too (a paused recording), where the position is
+    held (:func:`~estimator.filter.kernel._bridge`)."""
     bridge = (
         "carried along the wheel speed"
         if have_wheel
         else "carried along the last velocity (no wheel speed; its sigma widened for the speed)"
     )
+    held = "held (the wheels silent in it too: a paused recording?)"
+    silent = wheels_silent if have_wheel else ()
     n = len(start)
     named = n if n <= IMU_GAPS_NAMED else IMU_GAPS_NAMED - 1
     lines = []
@@ -303,15 +319,18 @@ def imu_gap_warnings(
         )
         lines.append(
             f"IMU gap {start[i]:.1f}-{end[i]:.1f} s: no estimate inside it, the position "
-            f"{bridge}; {int(left_out[i])} fixes inside it not used; {done}"
+            f"{held if i < len(silent) and silent[i] else bridge}; {int(left_out[i])} fixes "
+            f"inside it not used; {done}"
         )
     if named < n:
         rest = slice(named, n)
         total = float(np.sum(end[rest] - start[rest]))
         again = sum(at is not None for at in realigned[rest])
+        n_held = sum(silent[named:])
+        how = bridge if not n_held else f"{bridge} or, in {n_held} of them, {held}"
         lines.append(
             f"... and {n - named} more IMU gaps between {start[named]:.1f} and {end[-1]:.1f} s "
-            f"({total:.1f} s in all, the position {bridge}; {int(np.sum(left_out[rest]))} fixes "
+            f"({total:.1f} s in all, the position {how}; {int(np.sum(left_out[rest]))} fixes "
             f"inside them not used; {again} re-aligned from the GNSS track, "
             f"{n - named - again} not)"
         )

@@ -11,7 +11,12 @@ import numpy as np
 import pytest
 
 from estimator.evaluation.metrics import deviation_series
-from estimator.filter.setup import IMU_GAPS_NAMED, REALIGN_WITHIN_S, imu_gap_warnings
+from estimator.filter.setup import (
+    IMU_GAPS_NAMED,
+    REALIGN_WITHIN_S,
+    imu_gap_warnings,
+    wheels_cover,
+)
 from estimator.params import Params
 from estimator.pipeline import open_inputs, run_methods
 from estimator.pipeline.inputs import Inputs
@@ -157,3 +162,27 @@ def test_gap_lines_are_bounded_whatever_the_count(n: int) -> None:
             f"{30 * (n - k)} fixes inside them not used; {again} re-aligned from the "
             f"GNSS track, {n - k - again} not)"
         )
+
+
+def test_a_gap_the_wheels_fell_silent_in_too_is_named_held() -> None:
+    """The kernel carries the position by the wheels only where their samples cover the gap;
+    where they fell silent too (a paused recording) it holds it, and the line says so."""
+    n = IMU_GAPS_NAMED + 3
+    start = 10.0 + 20.0 * np.arange(n)
+    end = start + 6.0
+    silent = tuple(i % 2 == 1 for i in range(n))
+    lines = imu_gap_warnings(
+        start, end, np.zeros(n, np.intp), (None,) * n, have_wheel=True, wheels_silent=silent
+    )
+    assert "the position carried along the wheel speed;" in lines[0]
+    assert "the position held (the wheels silent in it too: a paused recording?);" in lines[1]
+    rest = sum(silent[IMU_GAPS_NAMED - 1 :])
+    assert f"or, in {rest} of them, held (the wheels silent" in lines[-1]
+
+
+def test_wheels_cover_a_gap_only_with_samples_on_both_sides_and_none_apart() -> None:
+    wheel_t = np.arange(0.0, 100.0, 0.1)
+    assert wheels_cover(wheel_t, 20.0, 30.0)
+    assert not wheels_cover(wheel_t[(wheel_t < 21.0) | (wheel_t > 29.0)], 20.0, 30.0)
+    assert not wheels_cover(wheel_t, 95.0, 120.0)
+    assert not wheels_cover(np.zeros(0), 20.0, 30.0)

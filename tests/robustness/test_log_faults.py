@@ -323,6 +323,8 @@ def test_a_ten_minute_gap_in_all_sensors(moved: bool) -> None:
     result = run(cut, None, Params(), method="baseline", frame=drive.frame)
     finite_run(result)
     assert any("IMU gaps longer than 1 s (largest 600.0 s)" in w for w in result.warnings)
+    (line,) = [w for w in result.warnings if w.startswith("IMU gap ")]
+    assert "the position held (the wheels silent in it too: a paused recording?)" in line
     e = result.epochs
     truth_t = e.t if moved else np.where(e.t > T0 + 700, e.t - 600.0, e.t)
     err = np.hypot(*(e.position[:, :2] - drive.truth_at(truth_t)).T)
