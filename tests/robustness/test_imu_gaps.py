@@ -9,6 +9,7 @@ from pathlib import Path
 
 import numpy as np
 import pytest
+from numpy.typing import NDArray
 
 from estimator.evaluation.metrics import deviation_series
 from estimator.filter.setup import (
@@ -20,6 +21,9 @@ from estimator.filter.setup import (
 from estimator.params import Params
 from estimator.pipeline import open_inputs, run_methods
 from estimator.pipeline.inputs import Inputs
+from estimator.results import Run
+
+F64 = NDArray[np.float64]
 
 SAMPLES = Path(__file__).resolve().parents[2] / "sample_logs"
 
@@ -36,17 +40,26 @@ def _without_imu(inputs: Inputs, a: float, b: float) -> Inputs:
     return dataclasses.replace(inputs, log=dataclasses.replace(inputs.log, imu=cut))
 
 
-def test_a_gap_in_the_tunnel_is_bridged_with_the_wheel_speed(long_tunnel: Inputs) -> None:
-    """60 s without IMU inside the long tunnel, the wheels logging on: held, the position
-    ended 1.3 km behind; carried along the wheels' distance it is metres off."""
-    gapped = _without_imu(long_tunnel, 150.0, 210.0)
+def _dead_reckoned_after(gapped: Inputs, lo: float, hi: float) -> tuple[Run, F64, F64]:
+    """The baseline run of ``gapped``, its truth error and horizontal sigma from ``lo`` to
+    ``hi`` s after the log start."""
     run = run_methods(gapped, Params(), methods=("baseline",))["baseline"]
     assert gapped.route is not None
     truth = deviation_series(run, gapped.route, gapped.log).truth
     assert truth is not None
     t = run.epochs.t[truth.index] - gapped.log.t_start
-    after = (t >= 210.0) & (t < 220.0)
-    assert after.any() and truth.h_err_m[after].max() < 20.0
+    after = (t >= lo) & (t < hi)
+    assert after.any()
+    sigma = np.hypot(*run.epochs.position_sigma[truth.index][after][:, :2].T)
+    return run, truth.h_err_m[after], sigma
+
+
+def test_a_gap_in_the_tunnel_is_bridged_with_the_wheel_speed(long_tunnel: Inputs) -> None:
+    """60 s without IMU inside the long tunnel, the wheels logging on: held, the position
+    ended 1.3 km behind; carried along the wheels' distance it is metres off."""
+    gapped = _without_imu(long_tunnel, 150.0, 210.0)
+    run, err, _ = _dead_reckoned_after(gapped, 210.0, 220.0)
+    assert err.max() < 20.0
     # one line for the gap: how it was bridged, and, as it ends in the tunnel, that the GNSS
     # return at the portal corrects the heading, not a chord through the portal's first,
     # noisy fixes
@@ -61,15 +74,7 @@ def test_without_wheel_speed_a_gap_in_the_tunnel_is_carried_not_held(long_tunnel
     metres; carried along the last velocity it is close, and its sigma covers the error."""
     gapped = _without_imu(long_tunnel, 150.0, 180.0)
     gapped = dataclasses.replace(gapped, log=dataclasses.replace(gapped.log, wheel=None))
-    run = run_methods(gapped, Params(), methods=("baseline",))["baseline"]
-    assert gapped.route is not None
-    truth = deviation_series(run, gapped.route, gapped.log).truth
-    assert truth is not None
-    t = run.epochs.t[truth.index] - gapped.log.t_start
-    after = (t >= 180.5) & (t < 185.0)
-    assert after.any()
-    err = truth.h_err_m[after]
-    sigma = np.hypot(*run.epochs.position_sigma[truth.index][after][:, :2].T)
+    run, err, sigma = _dead_reckoned_after(gapped, 180.5, 185.0)
     assert err.max() < 100.0  # held: 30 s x ~20 m/s = 600 m behind
     assert np.all(err < 3.0 * sigma)
     (note,) = [w for w in run.warnings if w.startswith("IMU gap 150.0-180.0 s")]
