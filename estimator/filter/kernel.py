@@ -241,7 +241,7 @@ def _bridge(x: F64, P: F64, aux: F64, t: float, wheel_t: F64, wheel_v: F64) -> N
     if speed < 0.1:
         return
     t0 = aux[A_TIME]
-    dist, v_end = _wheel_distance(t0, t, wheel_t, wheel_v)
+    dist, v_end = wheel_distance(t0, t, wheel_t, wheel_v)
     var = 0.0
     if dist < 0.0:
         if wheel_t.shape[0] > 0:
@@ -262,7 +262,7 @@ def _bridge(x: F64, P: F64, aux: F64, t: float, wheel_t: F64, wheel_v: F64) -> N
 
 
 @kernel
-def _wheel_distance(t0: float, t: float, wheel_t: F64, wheel_v: F64) -> tuple[float, float]:
+def wheel_distance(t0: float, t: float, wheel_t: F64, wheel_v: F64) -> tuple[float, float]:
     """(distance, speed at ``t``) the wheels measured from ``t0`` to ``t``, or (-1, 0) where
     their samples do not cover it (none, or two more than 1 s apart)."""
     a = np.searchsorted(wheel_t, t0)

@@ -14,7 +14,7 @@ from numpy.typing import NDArray
 
 from estimator.errors import LogError
 from estimator.filter.alignment import DEG_H, MG, align
-from estimator.filter.kernel import IMU_GAP_S
+from estimator.filter.kernel import IMU_GAP_S, wheel_distance
 from estimator.filter.layout import (
     A_DR,
     A_LAST_AID,
@@ -168,7 +168,9 @@ def prepare_inputs(log: Log, p: Params, frame: LocalFrame, outages: Outages) -> 
             left_out,
             tuple(None if r is None else r.t - log.t_start for r in after_gaps),
             have_wheel=len(wheel_t) > 0,
-            wheels_silent=tuple(not wheels_cover(wheel_t, imu_t[g], imu_t[g + 1]) for g in gaps),
+            wheels_silent=tuple(
+                wheel_distance(imu_t[g], imu_t[g + 1], wheel_t, wheel_v)[0] < 0.0 for g in gaps
+            ),
         )
     )
     realignments = tuple(r for r in after_gaps if r is not None)
@@ -264,16 +266,6 @@ def _realignments(
         x, P, k, _t_fix, _notes = aligned
         found.append(Realignment(t=float(imu_t[k1 + k]), x=x, P=P))
     return tuple(found)
-
-
-def wheels_cover(wheel_t: F64, t0: float, t1: float) -> bool:
-    """Whether wheel samples cover ``t0``-``t1`` (on both sides, none more than 1 s apart): the
-    kernel then carries the position across an IMU gap there by the wheels' distance."""
-    a = int(np.searchsorted(wheel_t, t0))
-    b = int(np.searchsorted(wheel_t, t1))
-    if a == 0 or b >= len(wheel_t) or b <= a:
-        return False
-    return bool(np.all(np.diff(wheel_t[a - 1 : b + 1]) <= 1.0))
 
 
 IMU_GAPS_NAMED = 5

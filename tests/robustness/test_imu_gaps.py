@@ -12,11 +12,11 @@ import pytest
 from numpy.typing import NDArray
 
 from estimator.evaluation.metrics import deviation_series
+from estimator.filter.kernel import wheel_distance
 from estimator.filter.setup import (
     IMU_GAPS_NAMED,
     REALIGN_WITHIN_S,
     imu_gap_warnings,
-    wheels_cover,
 )
 from estimator.params import Params
 from estimator.pipeline import open_inputs, run_methods
@@ -186,8 +186,14 @@ def test_a_gap_the_wheels_fell_silent_in_too_is_named_held() -> None:
 
 
 def test_wheels_cover_a_gap_only_with_samples_on_both_sides_and_none_apart() -> None:
+    def wheels_cover(wheel_t: F64, t0: float, t1: float) -> bool:
+        return wheel_distance(t0, t1, wheel_t, np.full(len(wheel_t), 10.0))[0] >= 0.0
+
     wheel_t = np.arange(0.0, 100.0, 0.1)
     assert wheels_cover(wheel_t, 20.0, 30.0)
+    assert wheel_distance(20.0, 30.0, wheel_t, np.full(len(wheel_t), 10.0))[0] == pytest.approx(
+        100.0
+    )
     assert not wheels_cover(wheel_t[(wheel_t < 21.0) | (wheel_t > 29.0)], 20.0, 30.0)
     assert not wheels_cover(wheel_t, 95.0, 120.0)
     assert not wheels_cover(np.zeros(0), 20.0, 30.0)
