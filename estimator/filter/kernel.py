@@ -54,8 +54,6 @@ from estimator.filter.layout import (
     STATUS_DIVERGED,
     STATUS_DONE,
     STATUS_FULL,
-    X_BG,
-    X_GSF,
     X_POS,
     X_QUAT,
     X_VEL,
@@ -173,8 +171,7 @@ def run_until(
         if dt == 0.0 and aux[A_INFLATE] > 0 and t - aux[A_TIME] > IMU_GAP_S:
             _bridge(x, P, aux, t, wheel_t, wheel_v)
         # --- strapdown, and the pending covariance propagation
-        wz = (0.5 * (aux[A_PREV_GYRO + 2] + gyro[k, 2]) - x[X_BG + 2]) / (1.0 + x[X_GSF])
-        fn0, fn1, fn2 = mechanise(x, aux, gyro, accel, k, dt, w, grav, itw, C)
+        fn0, fn1, fn2, wz = mechanise(x, aux, gyro, accel, k, dt, w, grav, itw, C)
         accumulate(aux, C, fn0, fn1, fn2, wz, dt)
         if aux[A_COV_T] >= cfg[C_COV_DT]:
             flush_into(P, aux, cfg, FA, FB, FC, FF)

@@ -41,13 +41,13 @@ def mechanise(
     grav: float,
     inv_tau_w: float,
     C: F64,
-) -> tuple[float, float, float]:
+) -> tuple[float, float, float, float]:
     """Advance the nominal state by ``dt`` to IMU sample ``k``: mid-point rates (the previous
     sample is in ``aux``), velocity with the mid-interval attitude, trapezoidal position, the
     GNSS wander's decay, and the DR track and distance (from the mechanised velocity only).
-    Leaves the mid-interval body->ENU matrix in ``C`` and returns the specific force in ENU
-    (both for the covariance propagation). The z rate is divided by ``1 + X_GSF`` (zero unless
-    extensions.gyro_scale_state estimates the z gyro's scale factor)."""
+    Leaves the mid-interval body->ENU matrix in ``C`` and returns the specific force in ENU and
+    the body z rate (all for the covariance propagation). The z rate is divided by ``1 +
+    X_GSF`` (zero unless extensions.gyro_scale_state estimates the z gyro's scale factor)."""
     wm0 = 0.5 * (aux[A_PREV_GYRO] + gyro[k, 0]) - x[X_BG]
     wm1 = 0.5 * (aux[A_PREV_GYRO + 1] + gyro[k, 1]) - x[X_BG + 1]
     wm2 = (0.5 * (aux[A_PREV_GYRO + 2] + gyro[k, 2]) - x[X_BG + 2]) / (1.0 + x[X_GSF])
@@ -86,4 +86,4 @@ def mechanise(
     aux[A_DR] += de
     aux[A_DR + 1] += dn
     aux[A_DIST] += math.sqrt(de * de + dn * dn)
-    return fn0, fn1, fn2
+    return fn0, fn1, fn2, wm2
