@@ -102,10 +102,9 @@ C_QW_H = 24  # GNSS wander driving PSD, horizontal
 C_QW_V = 25
 C_ROBUST = 26  # test fixes against the dead-reckoned motion
 C_WHITE_VAR = 27  # typical white variance of a horizontal fix coordinate
-C_ROUTE_EST = 28  # 1: route pseudo-positions estimate the lane-offset and map-bias errors
-C_CROSS_WIDEN = 29  # 1: a fix's heading widening takes only its innovation across the travel
-C_GSF_EST = 30  # 1: the z gyro's scale factor is estimated (E_GSF gets a gain, X_GSF applied)
-NC = 31
+C_CROSS_WIDEN = 28  # 1: a fix's heading widening takes only its innovation across the travel
+C_GSF_EST = 29  # 1: the z gyro's scale factor is estimated (E_GSF gets a gain, X_GSF applied)
+NC = 30
 
 # output rows
 O_T = 0

@@ -40,7 +40,6 @@ from estimator.filter.layout import (
     C_QW_V,
     C_RESET_S,
     C_ROBUST,
-    C_ROUTE_EST,
     C_SCALE_ON,
     C_TAU_A,
     C_TAU_G,
@@ -442,11 +441,12 @@ def _initial_aux(x0: F64, t_init: float, t_fix: float, gyro0: F64, accel0: F64) 
     return aux0
 
 
-def route_errors_estimated(p: Params) -> float:
-    """The kernel's flag (``C_ROUTE_EST``) for route pseudo-positions that estimate the map-bias
-    and lane-offset errors rather than only consider them: a matching parameter the filter
-    reads, so a re-run that reuses the inputs sets it afresh."""
-    return float(p.extensions.map_bias and p.offset.map_bias_estimated)
+def route_errors_estimated(p: Params) -> bool:
+    """Whether an outage's route pseudo-positions estimate the map-bias and lane-offset errors
+    of an applied bias rather than only consider them: a matching parameter, which the outage's
+    start writes into ``aux[A_ROUTE_EST]`` (:func:`~estimator.filter.updates.clone_route_errors`)
+    with the rest of what it clones, not the run's constants."""
+    return p.extensions.map_bias and p.offset.map_bias_estimated
 
 
 def kernel_config(p: Params, frame: LocalFrame, wheel_t: F64) -> F64:
@@ -473,7 +473,6 @@ def kernel_config(p: Params, frame: LocalFrame, wheel_t: F64) -> F64:
     cfg[C_SCALE_ON] = float(p.extensions.wheel_scale_state and len(wheel_t) > 0)
     cfg[C_RESET_S] = n.gnss_reset_after_s
     cfg[C_ROBUST] = float(p.extensions.robust_gnss)
-    cfg[C_ROUTE_EST] = route_errors_estimated(p)
     cautious = matching_params(p, have_wheel=len(wheel_t) > 0)
     cfg[C_CROSS_WIDEN] = float(cautious.extensions.cross_track_heading_widen)
     cfg[C_GSF_EST] = float(p.extensions.gyro_scale_state)

@@ -27,7 +27,6 @@ from estimator.filter.layout import (
     C_ARW2,
     C_GSF_EST,
     C_NHC_VAR,
-    C_ROUTE_EST,
     C_SCALE_ON,
     C_WHEEL_VAR,
     C_WIE,
@@ -362,7 +361,7 @@ def pseudo_position_update(
     innovation_cov(P, H, R, 2, PHt, S, Si)
     K = np.empty((NE, 3))
     dx = np.empty(NE)
-    estimate = cfg[C_ROUTE_EST] > 0 and aux[A_ROUTE_EST] > 0
+    estimate = aux[A_ROUTE_EST] > 0
     rot_est = aux[A_ROT_EST] > 0
     last = E_LANE if estimate else NE
     _apply_gain(x, P, y, 2, PHt, Si, cfg, K, dx, last, rot_est)

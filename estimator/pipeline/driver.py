@@ -41,7 +41,6 @@ from estimator.filter.layout import (
     A_ROUTE,
     A_TIME,
     A_USED_DIST,
-    C_ROUTE_EST,
     E_ATT,
     E_MAP,
     E_POS,
@@ -138,10 +137,6 @@ def run(
     key = filter_key(p)
     old = reusable_state(reuse, log, route, frame, outages_t, key)
     inputs = old.inputs if old is not None else prepare_inputs(log, p, frame, outages_t)
-    if inputs.cfg[C_ROUTE_EST] != route_errors_estimated(p):
-        cfg = inputs.cfg.copy()
-        cfg[C_ROUTE_EST] = route_errors_estimated(p)
-        inputs = dataclasses.replace(inputs, cfg=cfg)
     memo = Memo(None if old is None else old.memo)
     driver = Driver(log, route, p, matching, inputs, progress, memo)
     if old is not None and reuse is not None:
@@ -428,7 +423,8 @@ class Driver:
             gain, cov = bias.gain.copy(), bias.cov.copy()
             if not self.p.extensions.lane_offset_state:
                 gain[0], cov[0], cov[:, 0] = 0.0, 0.0, 0.0
-            clone_route_errors(P, aux, self.inp.cfg, gain, cov, bias.significant)
+            estimate = bias.significant and route_errors_estimated(self.p)
+            clone_route_errors(P, aux, self.inp.cfg, gain, cov, estimate)
         elif self.p.extensions.lane_offset_state and self.track.s is not None:
             t = self.route.tangent_at(self.track.s)[0]
             clone_lane_offset(P, aux, self.inp.cfg, np.array([-t[1], t[0]]))
@@ -814,7 +810,7 @@ class Driver:
         but not applied (a method-of-moments prior, as often spurious as not on a right map),
         where the prior stands out against the heading's (``offset.map_turn_min_heading_ratio``);
         an applied rotation's prior is the fit's own posterior."""
-        if bias is None or not bias.significant or self.inp.cfg[C_ROUTE_EST] <= 0:
+        if bias is None or not bias.significant or not route_errors_estimated(self.p):
             return False
         if bias.rotation != 0.0:
             return True

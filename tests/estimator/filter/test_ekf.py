@@ -136,7 +136,6 @@ def test_a_pseudo_position_estimates_the_route_errors_when_the_bias_is_applied()
     rng = np.random.default_rng(4)
     P = _random_cov(rng) * 0.1
     cfg = _config(rng)
-    cfg[layout.C_ROUTE_EST] = 1.0
     x = np.zeros(layout.NX)
     x[layout.X_QUAT] = 1.0
     x[layout.X_SCALE] = 1.0

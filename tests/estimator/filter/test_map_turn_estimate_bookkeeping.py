@@ -14,7 +14,6 @@ from estimator.filter.layout import (
     A_ROT_SHIFT,
     A_ROUTE,
     A_ROUTE_EST,
-    C_ROUTE_EST,
     E_ROT,
     NA,
     NC,
@@ -45,7 +44,6 @@ def _setup(rot_est: bool, seed: int) -> tuple[np.ndarray, np.ndarray, np.ndarray
     aux[A_ROUTE_EST] = 1.0
     aux[A_ROT_EST] = 1.0 if rot_est else 0.0
     cfg = np.zeros(NC)
-    cfg[C_ROUTE_EST] = 1.0
     return P, x, aux, cfg
 
 
