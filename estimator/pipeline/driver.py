@@ -897,10 +897,10 @@ class Driver:
         widen_to_innovation(f.P, y, position_on_map_cov(f.P) + applied_obs_cov(rec, self.p))
         return dataclasses.replace(rec, accepted=True, reanchored=True)
 
-    def after_gap(self, t: float) -> bool:
-        """Whether an IMU gap ended in the current outage by ``t``."""
+    def gaps_ended(self, t: float) -> F64:
+        """The ends of the IMU gaps that ended in the current outage by ``t``."""
         ends = self.gap_ends
-        return bool(np.any((ends > self.track.t_start) & (ends <= t)))
+        return ends[(ends > self.track.t_start) & (ends <= t)]
 
     def _reacquired(self, rec: MatchRecord) -> MatchRecord:
         """``rec`` accepted as a re-anchor after an IMU gap in this outage
@@ -917,7 +917,7 @@ class Driver:
         innovation, and the match is applied."""
         f = self.filt
         t_now = float(f.aux[A_TIME])
-        ends = self.gap_ends[(self.gap_ends > self.track.t_start) & (self.gap_ends <= t_now)]
+        ends = self.gaps_ended(t_now)
         if len(ends) == 0:
             return rec
         n = f.n_out

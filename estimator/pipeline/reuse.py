@@ -271,7 +271,7 @@ def _replay_attempts(d: Driver, old: ReuseState) -> None:
         # whether a refusal re-anchors depends on the live filter: judged live from there
         may_reanchor = (d.p.extensions.reanchor and blames_the_filter(rec, d.p)) or (
             d.p.extensions.gap_reacquire
-            and d.after_gap(rec.t)
+            and len(d.gaps_ended(rec.t)) > 0
             and blames_the_filter(rec, d.p, after_gap=True)
         )
         separation = [g for g in prev.gates if g.gate is Gate.DR_SEPARATION]
