@@ -307,6 +307,13 @@ def _with_shape_row(
     )
 
 
+def _along_observed(normal: F64, shift_cov: F64, params: Params) -> bool:
+    """Whether a fit pinned the map's shift along the road at the track's end (the route's left
+    normal there ``normal``): its sigma along the road under half the prior's."""
+    t = np.array([normal[1], -normal[0]])
+    return math.sqrt(float(t @ shift_cov @ t)) < 0.5 * params.offset.map_bias_prior_sigma_m
+
+
 def _fit_with_shape(
     A: F64,
     d: F64,
@@ -473,8 +480,7 @@ def learn_map_bias(
             second_moment = turn_var
     b, Cb = u[1:3], total[1:3, 1:3]
     chi2 = float(b @ np.linalg.solve(Cb, b))
-    t_end = np.array([normal_end[1], -normal_end[0]])
-    along_observed = math.sqrt(float(t_end @ C[1:3, 1:3] @ t_end)) < 0.5 * op.map_bias_prior_sigma_m
+    along_observed = _along_observed(normal_end, C[1:3, 1:3], params)
     refused: MapBiasRefusal | None = None
     if abs(u[0]) > op.max_offset_m:
         refused = "lane too far"
@@ -617,8 +623,6 @@ def refined_bias(
     offset = carried.offset + u[1:]
     total = C + G @ track_cov @ G.T
     b_total = total[1:, 1:]
-    normal_end = moved.normal_at(np.array([end_s]))[0]
-    t_end = np.array([normal_end[1], -normal_end[0]])
     return dataclasses.replace(
         carried,
         offset=offset,
@@ -628,8 +632,7 @@ def refined_bias(
         measured=offset,
         measured_cov=b_total,
         chi2=float(offset @ np.linalg.solve(b_total, offset)),
-        along_observed=math.sqrt(float(t_end @ C[1:, 1:] @ t_end))
-        < 0.5 * op.map_bias_prior_sigma_m,
+        along_observed=_along_observed(moved.normal_at(np.array([end_s]))[0], C[1:, 1:], params),
     )
 
 
@@ -687,8 +690,6 @@ def _refined_turn(
     here = carried.offset + carried.rotation * jd
     offset = here + u[1:3]
     b_total = total[1:3, 1:3]
-    normal_end = moved.normal_at(np.array([end_s]))[0]
-    t_end = np.array([normal_end[1], -normal_end[0]])
     turn_var = float(C[3, 3])
     return dataclasses.replace(
         carried,
@@ -702,8 +703,7 @@ def _refined_turn(
         measured=offset,
         measured_cov=b_total,
         chi2=float(offset @ np.linalg.solve(b_total, offset)),
-        along_observed=math.sqrt(float(t_end @ C[1:3, 1:3] @ t_end))
-        < 0.5 * op.map_bias_prior_sigma_m,
+        along_observed=_along_observed(moved.normal_at(np.array([end_s]))[0], C[1:3, 1:3], params),
         turn_var=turn_var,
         turn_second_moment=turn_var,
     )
