@@ -21,6 +21,7 @@ from estimator.errors import LogError
 from estimator.filter.engine import FilterState
 from estimator.filter.kernel import run_until
 from estimator.filter.layout import (
+    E_GSF,
     E_POS,
     I_OUT,
     NO,
@@ -72,10 +73,16 @@ class DeadReckoningTwin:
         inputs: FilterInputs,
         *,
         fixes_until: float,
+        gyro_scale_var: float = 0.0,
         rows: F64 | None = None,
     ) -> None:
         x, P, aux, idx = state
         self.x, self.P, self.aux, self.idx = x.copy(), P.copy(), aux.copy(), idx.copy()
+        self.considers_scale = gyro_scale_var > self.P[E_GSF, E_GSF]
+        """the twin considers the gyro's scale factor where the filter did not
+        (``extensions.dr_separation_gyro_scale``): its covariance is not the filter's to take"""
+        if self.considers_scale:
+            self.P[E_GSF, E_GSF] = gyro_scale_var
         self.idx[I_OUT] = 0
         self.inp = inputs
         self.fixes_until = fixes_until
@@ -95,6 +102,7 @@ class DeadReckoningTwin:
             fixes_until=self.fixes_until,
             rows=self.rows,
         )
+        twin.considers_scale = self.considers_scale
         twin.undone = self.undone
         return twin
 

@@ -625,6 +625,13 @@ class ExtensionParams:
         "updates in that outage: a map that pulls the estimate away from dead reckoning "
         "beyond its own confidence is wrong, and so is a filter that believes it",
     )
+    dr_separation_gyro_scale: bool = param(
+        True,
+        "the dead-reckoning twin considers the z gyro's scale-factor error "
+        "(noise.gyro_scale_sigma_ppm) even where the filter does not: dead reckoning's heading "
+        "error grows with the angle turned, and a twin that leaves it out takes a right route "
+        "through a spiral for a wrong one (the filter's own estimate is untouched)",
+    )
     map_turn_consider: bool = param(
         True,
         "carry the map's rotation error (the applied rotation's variance, or the second "

@@ -42,6 +42,7 @@ from estimator.filter.layout import (
     A_TIME,
     A_USED_DIST,
     E_ATT,
+    E_GSF,
     E_MAP,
     E_POS,
     E_VEL,
@@ -393,7 +394,7 @@ class Driver:
                 cloned = (f.P.copy(), f.aux.copy())
                 self.checkpoints[-1] = dataclasses.replace(self.checkpoints[-1], cloned=cloned)
                 if self.p.extensions.dr_separation:
-                    self.twin = DeadReckoningTwin(f.snapshot(), self.inp, fixes_until=a)
+                    self.twin = self._twin(a)
             while True:
                 t_try = a + tr.min_outage_s + k * tr.interval_s
                 if t_try >= b or t_try > self.inp.imu_t[-1]:
@@ -848,9 +849,7 @@ class Driver:
             if twin is not None and rec.reanchored:
                 # the filter's covariance was found not to cover its drift: dead reckoning
                 # starts afresh from the re-anchored state
-                self.twin = DeadReckoningTwin(
-                    f.snapshot(), self.inp, fixes_until=float(f.aux[A_TIME])
-                )
+                self.twin = self._twin(float(f.aux[A_TIME]))
             elif twin is not None:
                 rec = self._separation_checked(rec, twin)
                 if not rec.accepted:
@@ -866,6 +865,16 @@ class Driver:
         self.records.append(rec)
         self.after_match(rec, f.x, f.aux)
 
+    def _twin(self, since: float) -> DeadReckoningTwin:
+        """The filter's dead-reckoning twin from now (fixes up to ``since`` are the filter's)."""
+        scale = self.p.noise.gyro_scale_sigma_ppm * 1e-6
+        return DeadReckoningTwin(
+            self.filt.snapshot(),
+            self.inp,
+            fixes_until=since,
+            gyro_scale_var=scale * scale if self.p.extensions.dr_separation_gyro_scale else 0.0,
+        )
+
     def _separation_checked(self, rec: MatchRecord, twin: DeadReckoningTwin) -> MatchRecord:
         """``rec`` (just applied) with its dead-reckoning separation gate; when it fails, the
         outage's route updates are undone: the filter goes back to its twin, which took none
@@ -879,6 +888,9 @@ class Driver:
         twin.undone = Undone(rec.t, sep)
         f.x[:] = twin.x
         f.P[:] = twin.P
+        if twin.considers_scale:
+            f.P[E_GSF, :] = 0.0
+            f.P[:, E_GSF] = 0.0
         # what the outage's matches estimated of the route's errors, and where, goes back too
         estimated = slice(A_ROUTE, A_ROT_SHIFT + 2)
         f.aux[estimated] = twin.aux[estimated]

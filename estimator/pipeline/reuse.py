@@ -214,8 +214,18 @@ def resume(d: Driver, old: ReuseState, old_params: Params, *, reuse_matching: bo
         and p.extensions.dr_separation == old_params.extensions.dr_separation
         and (
             not p.extensions.dr_separation
-            or (p.gates.dr_separation_chi2, p.gates.dr_separation_floor_m)
-            == (old_params.gates.dr_separation_chi2, old_params.gates.dr_separation_floor_m)
+            or (
+                p.gates.dr_separation_chi2,
+                p.gates.dr_separation_floor_m,
+                p.extensions.dr_separation_gyro_scale,
+                p.noise.gyro_scale_sigma_ppm,
+            )
+            == (
+                old_params.gates.dr_separation_chi2,
+                old_params.gates.dr_separation_floor_m,
+                old_params.extensions.dr_separation_gyro_scale,
+                old_params.noise.gyro_scale_sigma_ppm,
+            )
         )
         and (
             not (p.extensions.reanchor or p.extensions.gap_reacquire)

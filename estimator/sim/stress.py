@@ -109,6 +109,28 @@ class Drive:
     """the IMU errors the simulator drew (what a calibration is checked against)"""
     imu_t: np.ndarray | None = None
     """the simulated IMU stamps ``imu_errors``' rows are at (an IMU gap cuts the log's)"""
+    biased_map: Route | None = None
+    """the road as the biased map draws it, before a trap moves or reverses it"""
+
+    def on_the_road(self) -> Inputs:
+        """The same drive on a map that draws the road as driven (its trap kept): the control
+        that tells what the method gains from a right route from what the map's bias costs."""
+        return dataclasses.replace(self.inputs, route=_trapped(self.road, self.spec.fault))
+
+    def map_error_across(self) -> np.ndarray:
+        """The biased map's offset across the road at the truth inside each GNSS outage, less
+        its value at the outage's start: what even a map bias learned exactly at the portal
+        leaves (the map's turn along the tunnel), concatenated over the outages."""
+        log, frame = self.inputs.log, self.inputs.frame
+        assert log.truth is not None and self.biased_map is not None
+        truth = frame.to_enu(log.truth.lat, log.truth.lon, log.truth.alt)[:, :2]
+        parts = []
+        for start, end in self.tunnels:
+            xy = truth[(log.truth.t >= start) & (log.truth.t <= end)]
+            if len(xy):
+                across = self.road.project(xy).lateral - self.biased_map.project(xy).lateral
+                parts.append(across - across[0])
+        return np.concatenate(parts) if parts else np.empty(0)
 
     def route_geojson(self) -> dict[str, Any]:
         """The drive's route file (biased or a trap, as drawn), its spec in the properties;
@@ -146,11 +168,24 @@ def build(spec: DriveSpec, *, progress: Progress | None = None) -> Drive:
     route = map_biased(
         road, spec.bias_along_m, spec.bias_across_m, spec.bias_rotation_deg, pivot=pivot
     )
-    if spec.fault == "parallel_road":
-        route = Route(route.xy + PARALLEL_SHIFT_M * _left_of(route), name=route.name)
-    elif spec.fault == "reversed_route":
-        route = Route(route.xy[::-1], name=route.name)
-    return Drive(spec, Inputs(log, route, sim.frame), road, sim.tunnels, sim.imu_errors, sim.imu.t)
+    return Drive(
+        spec,
+        Inputs(log, _trapped(route, spec.fault), sim.frame),
+        road,
+        sim.tunnels,
+        sim.imu_errors,
+        sim.imu.t,
+        route,
+    )
+
+
+def _trapped(route: Route, fault: Fault) -> Route:
+    """The route a trap drive is given: moved sideways onto a parallel road, or reversed."""
+    if fault == "parallel_road":
+        return Route(route.xy + PARALLEL_SHIFT_M * _left_of(route), name=route.name)
+    if fault == "reversed_route":
+        return Route(route.xy[::-1], name=route.name)
+    return route
 
 
 def _direction(route: Route) -> np.ndarray:

@@ -59,3 +59,29 @@ def test_the_runner_gives_a_row_of_finite_figures() -> None:
     for label in RUNS:
         assert np.isfinite(row[f"{label}_truth_rmse_m"]) and np.isfinite(row[f"{label}_nees_mean"])
     assert "| all (1) | baseline |" in summary([row])
+
+
+def test_the_control_drives_the_road_and_keeps_the_trap() -> None:
+    turned = build(drive_spec(0))  # map turned -0.27 deg about the long tunnel's middle
+    road = turned.on_the_road().route
+    assert road is not None
+    np.testing.assert_array_equal(road.xy, turned.road.xy)
+    trap = build(drive_spec(8))  # the parallel road: 25 m to the left
+    trapped = trap.on_the_road().route
+    assert trapped is not None
+    assert np.median(trapped.project(trap.road.xy).distance) > 20.0
+
+
+def test_the_map_drift_is_the_turn_along_the_tunnel() -> None:
+    drive = build(drive_spec(0))
+    drift = drive.map_error_across()
+    start, end = drive.tunnels[0]
+    assert len(drift) > 0 and drift[0] == 0.0
+    # a -0.27 deg turn over a tunnel kilometres long: metres across by its end
+    truth = drive.inputs.log.truth
+    assert truth is not None
+    xy = drive.inputs.frame.to_enu(truth.lat, truth.lon, truth.alt)[:, :2]
+    inside = xy[(truth.t >= start) & (truth.t <= end)]
+    length = float(np.sum(np.hypot(*np.diff(inside, axis=0).T)))
+    turn = np.radians(abs(drive.spec.bias_rotation_deg))
+    assert abs(drift[len(inside) - 1]) == pytest.approx(turn * length, rel=0.2)
