@@ -644,7 +644,7 @@ class ExtensionParams:
         "tenth of a degree is metres the pseudo-positions must not claim to know",
     )
     map_turn_release: bool = param(
-        False,
+        True,
         "at the end of an outage whose route updates followed an applied bias, add to the "
         "heading, velocity and position the map's rotation error they took from it unaccounted "
         "(its honest second moment less the variance the outage carried), fully correlated as "
