@@ -105,6 +105,10 @@ BIASED_RUNS = {
         "proposed",
         {"offset.map_turn_min_heading_ratio": 0.0},
     ),
+    "routefuse, `map_turn_release` off": (
+        "proposed",
+        {"extensions.map_turn_release": False},
+    ),
     "routefuse, `map_turn_two_places` off": (
         "proposed",
         {"extensions.map_turn_two_places": False},

@@ -650,6 +650,15 @@ class ExtensionParams:
         "noise does not show the map unturned, and kilometres from where it was learned a "
         "tenth of a degree is metres the pseudo-positions must not claim to know",
     )
+    map_turn_release: bool = param(
+        True,
+        "at the end of an outage whose route updates followed an applied bias, add to the "
+        "heading, velocity and position the map's rotation error they took from it unaccounted "
+        "(its honest second moment less the variance the outage carried), fully correlated as "
+        "a turned map moves them (the position turned about the bias's pivot): a heading held "
+        "to the map's is only as good as the map's rotation is known, and the first fixes "
+        "then correct it together with the position it explains",
+    )
     map_turn_two_places: bool = param(
         True,
         "where a bias is carried to the next outage and refined by the GNSS-good driving in "

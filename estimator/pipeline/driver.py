@@ -35,6 +35,7 @@ from estimator.filter.kernel import IMU_GAP_S, finite_state
 from estimator.filter.layout import (
     A_DIST,
     A_DR,
+    A_INFLATE,
     A_ROT,
     A_ROT_EST,
     A_ROT_SHIFT,
@@ -45,6 +46,7 @@ from estimator.filter.layout import (
     E_GSF,
     E_MAP,
     E_POS,
+    E_ROT,
     E_VEL,
     I_IMU,
     O_DIST,
@@ -53,6 +55,7 @@ from estimator.filter.layout import (
     O_POS,
     O_SIG_POS,
     O_T,
+    X_POS,
     X_VEL,
 )
 from estimator.filter.portal import advance_to_outage
@@ -413,8 +416,40 @@ class Driver:
                     self._attempt_live()
                     dist_last = d
                 k += 1
+            if self.p.extensions.map_turn_release:
+                self._release_turn(i, a, b)
             at = None
         f.advance(math.inf)
+
+    def _release_turn(self, i: int, a: float, b: float) -> None:
+        """At the end of outage ``i`` (``a`` to ``b``), give the navigation state back the
+        map's rotation error its route updates put into it unaccounted
+        (``extensions.map_turn_release``): what the rotation's honest second moment exceeds
+        the variance the outage carried for it (often a method-of-moments zero), along the
+        direction a turned map moves the state: position turned about the bias's pivot,
+        heading and velocity turned alike. A heading held to the map's for a tunnel is only
+        as good as the map's rotation is known; with that correlation the first fix after
+        the outage corrects the heading with the position it explains, as dead reckoning's
+        own correlations would, instead of a heading left confidently on the map's turn."""
+        bias = self.track.bias
+        if bias is None or not bias.significant:
+            return
+        if self.twin is not None and self.twin.undone is not None:
+            return  # back on dead reckoning, whose covariance is its own
+        if not any(r.accepted and a <= r.t <= b for r in self.records):
+            return
+        starts = [c for c in self.checkpoints if c.kind == "outage" and c.interval == i]
+        cloned = starts[-1].cloned if starts else None
+        if cloned is None:
+            return
+        extra = bias.turn_second_moment - float(cloned[0][E_ROT, E_ROT])
+        if extra <= 0.0:
+            return
+        f = self.filt
+        f.advance(b)
+        flush_covariance(f.P, f.aux, self.inp.cfg)
+        release_turn(f.x, f.P, bias.pivot, extra)
+        f.aux[A_INFLATE] = 0.0  # the next fix is tested against that, not widened to it
 
     def clone_route_errors(self, x: F64, P: F64, aux: F64) -> None:
         """At an outage's start (after :meth:`begin_interval`): the lane-offset, map-bias and
@@ -1049,6 +1084,20 @@ def unapplied_considered(bias: MapBias) -> MapBias:
     cov = bias.cov.copy()
     cov[1:, 1:] += (v * np.maximum(w, 0.0)) @ v.T
     return dataclasses.replace(bias, cov=cov)
+
+
+def release_turn(x: F64, P: F64, pivot: F64, var: float) -> None:
+    """Add ``var`` (rad^2) of a turn about ``pivot`` (E, N) to the navigation state: yaw,
+    the horizontal velocity turned with it (``e_up x v``) and the position turned about the
+    pivot (``e_up x (p - pivot)``), fully correlated, as a map turned by that much moves a
+    state its route updates held to it (``extensions.map_turn_release``)."""
+    j = np.zeros(P.shape[0])
+    j[E_ATT + 2] = 1.0
+    j[E_VEL] = -x[X_VEL + 1]
+    j[E_VEL + 1] = x[X_VEL]
+    j[E_POS] = -(x[X_POS + 1] - pivot[1])
+    j[E_POS + 1] = x[X_POS] - pivot[0]
+    P += var * np.outer(j, j)
 
 
 def turn_heading(x: F64, P: F64, var: float) -> None:

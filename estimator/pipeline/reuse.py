@@ -205,6 +205,7 @@ def resume(d: Driver, old: ReuseState, old_params: Params, *, reuse_matching: bo
         and p.extensions.map_turn_estimate == old_params.extensions.map_turn_estimate
         and p.extensions.map_turn_two_places == old_params.extensions.map_turn_two_places
         and p.extensions.map_turn_honest_consider == old_params.extensions.map_turn_honest_consider
+        and p.extensions.map_turn_release == old_params.extensions.map_turn_release
         and p.extensions.geometry_covariance == old_params.extensions.geometry_covariance
         and p.extensions.weak_along_track == old_params.extensions.weak_along_track
         and p.pseudo.weak_along_disagreement == old_params.pseudo.weak_along_disagreement

@@ -180,6 +180,7 @@ def turned_map_drive():
         {"extensions.weak_along_track": False},
         {"extensions.map_turn_two_places": False},
         {"extensions.map_turn_honest_consider": True},
+        {"extensions.map_turn_release": False},
         {"offset.map_bias_estimated": False},
         {"pseudo.shape_noise_m": 1.5},
         {"pseudo.along_sigma_min_m": 0.75},
