@@ -584,12 +584,23 @@ class ExtensionParams:
         "every cross-track update moves the along-track velocity through them; on through "
         "no_wheel_caution",
     )
+    along_drift_evidence: bool = param(
+        False,
+        "where fixes inside an outage (a gap between tunnel tubes) correct the position along "
+        "the travel by more than the filter's along-track sigma, the excess is along-track drift "
+        "the model does not have (an accelerometer scale or mounting error, no odometer to bound "
+        "it): estimate it as a velocity random walk along the travel (the excess variance over "
+        "the time it grew in, covariance matching) and add it to the filter for the rest of the "
+        "outage, so the covariance after a bend's along-track correction covers the regrowth; "
+        "on through no_wheel_caution",
+    )
     no_wheel_caution: bool = param(
         True,
         "on a log without wheel speed, switch on covariance_search, curvature_covariance, "
-        "overlap_inflation, window_scale_covariance, cross_track_heading_widen and "
-        "calibrated_approach (the dead-reckoned along-track position is then uncertain by tens "
-        "to hundreds of metres, which is what they are for) and offset.map_turn_honest_prior "
+        "overlap_inflation, window_scale_covariance, cross_track_heading_widen, "
+        "calibrated_approach and along_drift_evidence (the dead-reckoned along-track position "
+        "is then uncertain by tens to hundreds of metres, which is what they are for) and "
+        "offset.map_turn_honest_prior "
         "(the weak heading is otherwise turned by a map rotation the approach could not tell "
         "from zero), and switch off weak_along_track and dr_separation (the filter's own "
         "covariance is then no yardstick); a log with wheel speed is matched as the other "
@@ -702,6 +713,17 @@ class NoiseParams:
         lo=0.001,
         hi=100,
         step=0.1,
+    )
+    along_drift_share: float = param(
+        0.1,
+        "with extensions.along_drift_evidence, the share of the along-track velocity random "
+        "walk the outage's corrections show (covariance matching) that is added: one stretch's "
+        "excess is a single chi-square sample, and a bend's correction also carries the "
+        "attitude and the window's shape errors; 1 takes it whole (on the 42 IMU-only cases "
+        "1 and 0.2 lose the long-tunnel sim 20, 0.05 no longer wins sim 12)",
+        lo=0.0,
+        hi=10.0,
+        step=0.01,
     )
     accel_bias_tau_s: float = param(
         3600.0, "accelerometer bias correlation time", unit="s", lo=1, hi=100000, step=10
@@ -922,7 +944,9 @@ def matching_params(params: Params, *, have_wheel: bool) -> Params:
     """The parameters the route matcher runs with on a log with or without wheel speed: with
     ``extensions.no_wheel_caution`` and no wheel speed, the switches for a dead-reckoned
     along-track position that is uncertain by tens to hundreds of metres are on (and
-    ``calibrated_approach``: an outage after too little GNSS-aided driving is dead-reckoned),
+    ``calibrated_approach``: an outage after too little GNSS-aided driving is dead-reckoned;
+    ``along_drift_evidence``: an along-track drift the model lacks, shown by a correction
+    beyond the filter's sigma, is carried as a velocity random walk for the rest of the outage),
     ``weak_along_track`` and ``dr_separation`` are off (the filter's along-track is then no
     yardstick for a fit, and dead reckoning's covariance none for the route updates: on the
     real comma2k19 log without its wheels it undid updates that beat dead reckoning), and
@@ -942,6 +966,7 @@ def matching_params(params: Params, *, have_wheel: bool) -> Params:
         dr_separation=False,
         cross_track_heading_widen=True,
         calibrated_approach=True,
+        along_drift_evidence=True,
     )
     offset = replace(params.offset, map_turn_honest_prior=True)
     if cautious == ext and offset == params.offset:

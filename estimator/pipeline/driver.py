@@ -55,6 +55,7 @@ from estimator.filter.layout import (
     O_POS,
     O_SIG_POS,
     O_T,
+    O_VEL,
     X_POS,
     X_VEL,
 )
@@ -405,6 +406,10 @@ class Driver:
                 redo = at is not None and i == at.interval and k == at.k
                 if not redo:
                     f.advance(t_try)
+                    if self.p.extensions.along_drift_evidence:
+                        q = along_drift_psd(f.out[: f.n_out], a, t_try)
+                        share = self.p.noise.along_drift_share
+                        grow_along_velocity(f.P, f.x, share * q * tr.interval_s)
                 d = float(f.aux[A_DIST])
                 if d - dist_a >= tr.min_outage_distance_m and d - dist_last >= spacing:
                     if not redo:
@@ -1125,6 +1130,57 @@ def widen_to_innovation(P: F64, y: F64, s: F64) -> None:
     c = size * size - 1.0 / a if a > 0 else 0.0
     if c > 0.0:
         P[E_POS : E_POS + 2, E_POS : E_POS + 2] += c * np.outer(u, u)
+
+
+DRIFT_WINDOW_S = 10.0
+"""s: the stretch over which a correction along the travel is compared with the along-track
+sigma the filter claimed before it (``extensions.along_drift_evidence``)"""
+
+
+def along_drift_psd(rows: F64, t_a: float, t: float) -> float:
+    """The along-track velocity random walk (PSD, (m/s)^2/s) that the corrections inside the
+    outage starting at ``t_a`` show the model lacks (``extensions.along_drift_evidence``).
+
+    Over each ``DRIFT_WINDOW_S`` stretch ending on a whole second up to ``t``, the updates
+    (route pseudo-positions, the non-holonomic constraint in a bend) moved the position along
+    the travel by ``c`` beyond the dead-reckoned motion, where the filter claimed ``s`` (its
+    along-track sigma at the stretch's start). An excess ``c^2 - s^2`` grown over the ``tau``
+    seconds since the outage started is what a velocity random walk of PSD
+    ``3 (c^2 - s^2) / tau^3`` adds (covariance matching); the largest over the stretches is
+    returned, 0 where every correction is within its sigma (an honest along-track covariance)."""
+    w = DRIFT_WINDOW_S
+    ends = np.arange(t_a + 2.0 * w, t + 1e-9, 1.0)
+    if ends.size == 0:
+        return 0.0
+    tt = rows[:, O_T]
+    i1 = np.minimum(np.searchsorted(tt, ends, side="right") - 1, len(rows) - 1)
+    i0 = np.searchsorted(tt, ends - w, side="right") - 1
+    ok = (i0 >= 0) & (i1 > i0)
+    i0, i1 = i0[ok], i1[ok]
+    if i0.size == 0:
+        return 0.0
+    before = rows[i0]
+    v = before[:, O_VEL : O_VEL + 2]
+    speed = np.hypot(v[:, 0], v[:, 1])
+    u = v / np.maximum(speed, 1e-9)[:, None]
+    moved = rows[i1, O_POS : O_POS + 2] - before[:, O_POS : O_POS + 2]
+    dr = rows[i1, O_DR : O_DR + 2] - before[:, O_DR : O_DR + 2]
+    c = np.sum((moved - dr) * u, axis=1)
+    s2 = np.sum((before[:, O_SIG_POS : O_SIG_POS + 2] * u) ** 2, axis=1)
+    tau = before[:, O_T] - t_a
+    q = 3.0 * np.maximum(c * c - s2, 0.0) / np.maximum(tau, w) ** 3
+    q[speed <= 1.0] = 0.0
+    return float(np.max(q))
+
+
+def grow_along_velocity(P: F64, x: F64, var: float) -> None:
+    """Add ``var`` ((m/s)^2) to the velocity error's variance along the horizontal travel."""
+    v = x[X_VEL : X_VEL + 2]
+    speed = math.hypot(float(v[0]), float(v[1]))
+    if var <= 0.0 or speed <= 1.0:
+        return
+    u = v / speed
+    P[E_VEL : E_VEL + 2, E_VEL : E_VEL + 2] += var * np.outer(u, u)
 
 
 def window_scale_sigma(out: F64, n_out: int, x: F64, P: F64, aux: F64, length_m: float) -> float:

@@ -212,6 +212,7 @@ def resume(d: Driver, old: ReuseState, old_params: Params, *, reuse_matching: bo
         and p.extensions.reanchor == old_params.extensions.reanchor
         and p.extensions.gap_reacquire == old_params.extensions.gap_reacquire
         and p.extensions.calibrated_approach == old_params.extensions.calibrated_approach
+        and p.extensions.along_drift_evidence == old_params.extensions.along_drift_evidence
         and p.extensions.dr_separation == old_params.extensions.dr_separation
         and (
             not p.extensions.dr_separation

@@ -19,7 +19,12 @@ from estimator.matching.geometry import Polyline
 from estimator.matching.match import search_half_width
 from estimator.params import Params, for_method, load_params, matching_params, with_values
 from estimator.pipeline import open_inputs, run_methods
-from estimator.pipeline.driver import aided_approach_m, window_scale_sigma
+from estimator.pipeline.driver import (
+    aided_approach_m,
+    along_drift_psd,
+    grow_along_velocity,
+    window_scale_sigma,
+)
 from estimator.route import Route
 from estimator.sim.imu_only import build_imu_only, imu_only_spec
 from estimator.sim.stress import build, drive_spec
@@ -50,6 +55,7 @@ def test_the_caution_is_only_for_logs_without_wheel_speed() -> None:
     assert matching_params(p, have_wheel=False).offset.map_turn_honest_prior
     assert ext.cross_track_heading_widen and not p.extensions.cross_track_heading_widen
     assert ext.calibrated_approach and not p.extensions.calibrated_approach
+    assert ext.along_drift_evidence and not p.extensions.along_drift_evidence
     assert not p.offset.map_turn_honest_prior
     off = with_values(p, {"extensions.no_wheel_caution": False})
     assert matching_params(off, have_wheel=False) is off
@@ -126,6 +132,63 @@ def test_the_window_length_sigma_is_the_velocity_sigma_along_travel_times_its_du
     assert window_scale_sigma(out, n, x, P, aux, 50.0) == pytest.approx(15.0)
     x[ly.X_VEL : ly.X_VEL + 2] = 0.0
     assert window_scale_sigma(out, n, x, P, aux, 50.0) == 0.0
+
+
+def _drifting_rows(jump: tuple[float, float], sigma: float) -> np.ndarray:
+    """Output rows of a drive East at 20 m/s from 1 s before an outage at t = 0 to 60 s into
+    it, dead-reckoned exactly but for a correction of ``jump`` (E, N) at t = 39.5 s, the filter
+    claiming ``sigma`` per axis."""
+    t = np.arange(-1.0, 60.0 + 1e-9, 0.05)
+    out = np.zeros((len(t), ly.NO))
+    out[:, ly.O_T] = t
+    out[:, ly.O_VEL] = 20.0
+    out[:, ly.O_DR] = 20.0 * t
+    out[:, ly.O_POS] = out[:, ly.O_DR]
+    after = t >= 39.5 - 1e-9
+    out[after, ly.O_POS] += jump[0]
+    out[after, ly.O_POS + 1] += jump[1]
+    out[:, ly.O_SIG_POS : ly.O_SIG_POS + 2] = sigma
+    return out
+
+
+def test_a_correction_beyond_the_along_track_sigma_is_a_velocity_random_walk() -> None:
+    """50 m corrected along the travel where the filter claimed 10 m, 30 s (the earliest
+    10 s stretch holding it starts at 30 s) after the outage started: the random walk that
+    grows the missing 50^2 - 10^2 m^2 in that time, 3 (c^2 - s^2) / tau^3."""
+    q = along_drift_psd(_drifting_rows((-50.0, 0.0), 10.0), 0.0, 60.0)
+    assert q == pytest.approx(3.0 * (50.0**2 - 10.0**2) / 30.0**3, rel=1e-2)
+    # before the correction there is no evidence, within its sigma none, across the travel
+    # it is no along-track drift
+    assert along_drift_psd(_drifting_rows((-50.0, 0.0), 10.0), 0.0, 39.0) == 0.0
+    assert along_drift_psd(_drifting_rows((-8.0, 0.0), 10.0), 0.0, 60.0) == 0.0
+    assert along_drift_psd(_drifting_rows((0.0, 50.0), 10.0), 0.0, 60.0) == 0.0
+
+
+def test_the_along_drift_grows_the_velocity_variance_along_the_travel_only() -> None:
+    x = np.zeros(ly.NX)
+    x[ly.X_VEL : ly.X_VEL + 2] = [0.0, 15.0]
+    P = np.eye(ly.NE)
+    grow_along_velocity(P, x, 0.5)
+    expected = np.eye(ly.NE)
+    expected[ly.E_VEL + 1, ly.E_VEL + 1] += 0.5
+    np.testing.assert_array_equal(P, expected)
+    x[ly.X_VEL : ly.X_VEL + 2] = 0.0  # standing: no travel to grow along
+    grow_along_velocity(P, x, 0.5)
+    np.testing.assert_array_equal(P, expected)
+
+
+def test_an_imu_only_long_tunnel_beats_dead_reckoning_by_the_along_drift_evidence() -> None:
+    """Sim 12: the bend half-way along the long tunnel puts the position right, and a
+    mis-mounted, mis-scaled accelerometer takes it 230 m off by the next bend with the
+    filter claiming 60 m; the non-holonomic constraint there then corrects little. The first
+    bend's correction, about 270 m where the filter claimed 120 m, is the evidence of that drift:
+    carried as a velocity random walk it keeps the covariance honest (within dead reckoning
+    with it, beyond without it)."""
+    inputs = build_imu_only(imu_only_spec(12)).inputs
+    baseline = _truth_rmse(inputs, Params(), "baseline")
+    assert _truth_rmse(inputs, Params(), "proposed") <= baseline
+    without = _cautious_but(**{"extensions.along_drift_evidence": False})
+    assert _truth_rmse(inputs, without, "proposed") > baseline
 
 
 def test_an_imu_only_drive_is_a_pure_function_of_its_index_and_has_its_faults() -> None:

@@ -9,7 +9,7 @@ import numpy as np
 import pytest
 
 from estimator.log import ImuData
-from estimator.params import Params, with_values
+from estimator.params import Params, matching_params, with_values
 from estimator.pipeline import run
 from tests.robustness._faultdrive import make_drive, route_along
 
@@ -200,3 +200,25 @@ def test_reuse_on_a_turned_map_gives_the_same_run_as_starting_over(turned_map_dr
     fresh = run(inputs.log, inputs.route, p, frame=inputs.frame)
     assert _same_epochs(again, fresh)
     assert [m.accepted for m in again.matches] == [m.accepted for m in fresh.matches]
+
+
+def test_reuse_with_the_along_drift_evidence_flipped_gives_the_same_run_as_starting_over() -> None:
+    """``extensions.along_drift_evidence`` grows the filter's covariance between attempts, so
+    the old run's saved states are not the new run's: a re-run with it flipped must run the
+    outages live, not re-judge the old attempts (a no-odometer corpus drive, the rest of the
+    wheel-less caution as it is)."""
+    from estimator.sim.stress import build, drive_spec
+
+    inputs = build(drive_spec(2)).inputs
+    assert inputs.log.wheel is None
+    cautious = matching_params(Params(), have_wheel=False)
+
+    def params(on: bool) -> Params:
+        values = {"extensions.no_wheel_caution": False, "extensions.along_drift_evidence": on}
+        return with_values(cautious, values)
+
+    old = run(inputs.log, inputs.route, params(False), frame=inputs.frame)
+    again = run(inputs.log, inputs.route, params(True), frame=inputs.frame, reuse=old)
+    fresh = run(inputs.log, inputs.route, params(True), frame=inputs.frame)
+    assert not np.array_equal(old.epochs.position, fresh.epochs.position)
+    assert _same_epochs(again, fresh)
