@@ -121,7 +121,14 @@ BIASED_RUNS = {
         "proposed",
         {"offset.map_bias_walk_m_per_sqrt_km": 0.0},
     ),
-    "routefuse + `gyro_scale_consider`": ("proposed", {"extensions.gyro_scale_consider": True}),
+    "routefuse, `gyro_scale_consider` off": (
+        "proposed",
+        {"extensions.gyro_scale_consider": False},
+    ),
+    "routefuse, `gyro_scale_blind_gain` off": (
+        "proposed",
+        {"extensions.gyro_scale_blind_gain": False},
+    ),
     "routefuse + `reanchor`": ("proposed", {"extensions.reanchor": True}),
     "routefuse + `reanchor`, `map_bias` off": (
         "proposed",

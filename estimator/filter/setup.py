@@ -30,6 +30,7 @@ from estimator.filter.layout import (
     C_CROSS_WIDEN,
     C_GNSS_GATE,
     C_GRAVITY,
+    C_GSF_BLIND,
     C_GSF_EST,
     C_LEVER,
     C_NHC_VAR,
@@ -476,6 +477,11 @@ def kernel_config(p: Params, frame: LocalFrame, wheel_t: F64) -> F64:
     cautious = matching_params(p, have_wheel=len(wheel_t) > 0)
     cfg[C_CROSS_WIDEN] = float(cautious.extensions.cross_track_heading_widen)
     cfg[C_GSF_EST] = float(p.extensions.gyro_scale_state)
+    cfg[C_GSF_BLIND] = float(
+        p.extensions.gyro_scale_consider
+        and p.extensions.gyro_scale_blind_gain
+        and not p.extensions.gyro_scale_state
+    )
     gap = float(np.median(np.diff(wheel_t))) if len(wheel_t) > 1 else 0.0
     cfg[C_WHEEL_GAP] = max(0.5, 5 * gap)
     return cfg

@@ -25,6 +25,7 @@ from estimator.filter.layout import (
     A_ROUTE_EST,
     C_AID_DT,
     C_ARW2,
+    C_GSF_BLIND,
     C_GSF_EST,
     C_NHC_VAR,
     C_SCALE_ON,
@@ -167,6 +168,9 @@ def _apply_gain(
     # rot_est (a route pseudo-position with extensions.map_turn_estimate); the z gyro's
     # scale-factor error E_GSF is unless C_GSF_EST (extensions.gyro_scale_state)
     gsf_est = cfg[C_GSF_EST] > 0
+    if cfg[C_GSF_BLIND] > 0 and not gsf_est and P[E_GSF, E_GSF] > 0.0:
+        _apply_blind_gain(x, P, y, m, PHt, Si, cfg, K, dx, last_considered, rot_est)
+        return
     for i in range(NE):
         for a in range(m):
             acc = 0.0
@@ -197,6 +201,81 @@ def _apply_gain(
     if not cfg[C_SCALE_ON] > 0:
         dx[E_SCALE] = 0.0
     inject(x, dx)  # x <- x (+) dx
+
+
+@kernel
+def _apply_blind_gain(
+    x: F64,
+    P: F64,
+    y: F64,
+    m: int,
+    PHt: F64,
+    Si: F64,
+    cfg: F64,
+    K: F64,
+    dx: F64,
+    last_considered: int,
+    rot_est: bool,
+) -> None:
+    """:func:`_apply_gain` with the gain of the filter that does not know the considered z gyro
+    scale factor (``extensions.gyro_scale_blind_gain``), and the covariance updated for that
+    gain (Joseph form), so that it stays the covariance of the error this filter makes.
+
+    With ``s`` the scale error (variance ``ss``) and ``c = P[:, E_GSF]``, the error is
+    ``e0 + c s / ss`` with ``e0`` independent of ``s``; ``P0 = P - c c^T / ss`` is the
+    covariance the filter without the scale carries (its rows and column of ``E_GSF`` zero),
+    and the gain from it is that filter's gain, whatever the scale's share of ``P``: the
+    estimate follows the filter that ignores the scale, while ``P`` (gates, sigmas) also
+    covers the heading and position error the scale makes. Estimating the scale (or weighting
+    updates by its variance) makes dead reckoning worse where its error cancels others
+    (docs/integrity.md); this keeps that estimate and only tells how wrong it can be."""
+    ss = P[E_GSF, E_GSF]
+    h = np.empty(3)
+    for a in range(m):
+        h[a] = PHt[E_GSF, a]  # H c
+    S = np.empty((3, 3))
+    _inv_small(Si, m, S)
+    S0 = np.empty((3, 3))
+    for a in range(m):
+        for b in range(m):
+            S0[a, b] = S[a, b] - h[a] * h[b] / ss
+    Si0 = np.empty((3, 3))
+    _inv_small(S0, m, Si0)
+    gsf_est = False
+    for i in range(NE):
+        ci = P[i, E_GSF] / ss
+        for a in range(m):
+            acc = 0.0
+            for b in range(m):
+                acc += (PHt[i, b] - ci * h[b]) * Si0[b, a]
+            K[i, a] = acc  # K = P0 H^T (H P0 H^T + R)^-1
+    for i in range(NE):
+        if _considered(i, last_considered, rot_est, gsf_est):
+            for a in range(m):
+                K[i, a] = 0.0
+    KS = np.empty((NE, 3))
+    for i in range(NE):
+        for a in range(m):
+            acc = 0.0
+            for b in range(m):
+                acc += K[i, b] * S[b, a]
+            KS[i, a] = acc
+    for i in range(NE):
+        for j in range(i, NE):
+            acc = 0.0
+            for a in range(m):
+                acc += K[i, a] * PHt[j, a] + PHt[i, a] * K[j, a] - KS[i, a] * K[j, a]
+            v = P[i, j] - acc  # P <- (I - K H) P (I - K H)^T + K R K^T
+            P[i, j] = v
+            P[j, i] = v
+    for i in range(NE):
+        acc = 0.0
+        for a in range(m):
+            acc += K[i, a] * y[a]
+        dx[i] = acc
+    if not cfg[C_SCALE_ON] > 0:
+        dx[E_SCALE] = 0.0
+    inject(x, dx)
 
 
 @kernel

@@ -504,11 +504,18 @@ class ExtensionParams:
     )
     wheel_scale_state: bool = param(True, "estimate the wheel-speed scale factor as a state")
     gyro_scale_consider: bool = param(
-        False,
+        True,
         "carry the z gyro's scale-factor error (noise.gyro_scale_sigma_ppm) as a considered "
         "state: the heading error it makes grows with the angle turned, not with time, and "
         "is one quantity over the drive, so bias and white-noise terms cannot cover it (a "
         "spiral tunnel turns the heading by its full error many times)",
+    )
+    gyro_scale_blind_gain: bool = param(
+        True,
+        "with gyro_scale_consider: no update's gain uses the considered scale factor (the "
+        "estimate is the one of the filter without it) and the covariance is updated for "
+        "that gain, so the gates, the separation test and the reported sigma cover the "
+        "error the scale makes while the dead reckoning stays the defaults'",
     )
     gyro_scale_state: bool = param(
         False,

@@ -135,6 +135,7 @@ def filter_key(p: Params) -> Key:
         p.sensors,
         ext.wheel_scale_state,
         ext.gyro_scale_consider,
+        ext.gyro_scale_blind_gain,
         ext.gyro_scale_state,
         ext.robust_gnss,
         ext.portal_rerun,
