@@ -99,24 +99,33 @@ def test_a_rerun_after_an_undo_equals_a_fresh_run(drive5: dict[str, Run]) -> Non
 
 def test_a_right_route_through_a_spiral_is_not_taken_for_a_wrong_one() -> None:
     """Drive 5 on a map that draws the road as driven: its dead reckoning turns with the
-    gyro's scale-factor error, which a twin without it does not cover, so the right route's
-    updates were undone (7.4 m against the baseline's 7.56); a twin that considers the scale
-    keeps them, and still undoes the biased map's (the test above)."""
+    gyro's scale-factor error. With the filter not considering it (``gyro_scale_consider``
+    off), a twin without it does not cover that turn, and the right route's updates were
+    undone (7.4 m against the baseline's 7.56); a twin that considers the scale
+    (``dr_separation_gyro_scale``) keeps them, as does the filter with its defaults, whose
+    covariance (and so its twin's) carries the scale itself."""
     drive = build(drive_spec(5))
     road = drive.on_the_road()
     assert road.log.truth is not None
-    off = with_values(Params(), {"extensions.dr_separation_gyro_scale": False})
-    runs = {
-        "baseline": run_methods(road, Params(), methods=("baseline",))["baseline"],
-        "twin_scaled": run_methods(road, Params(), methods=("proposed",))["proposed"],
-        "twin_unscaled": run_methods(road, off, methods=("proposed",))["proposed"],
+    unscaled = {"extensions.gyro_scale_consider": False}
+    values = {
+        "defaults": {},
+        "twin_scaled": unscaled,
+        "twin_unscaled": {**unscaled, "extensions.dr_separation_gyro_scale": False},
     }
+    runs = {
+        n: run_methods(road, with_values(Params(), v), methods=("proposed",))["proposed"]
+        for n, v in values.items()
+    }
+    runs["baseline"] = run_methods(road, Params(), methods=("baseline",))["baseline"]
     rmse = {}
     for name, r in runs.items():
         err, _ = outage_errors(r, road.log, road.frame)
         rmse[name] = float(np.sqrt(np.mean(np.sum(err**2, axis=1))))
     undone = {n: any("dr_separation_m" in m.extra for m in r.matches) for n, r in runs.items()}
-    assert undone["twin_unscaled"] and not undone["twin_scaled"]
-    assert rmse["twin_scaled"] < 0.5 * rmse["baseline"] < rmse["twin_unscaled"]
+    assert undone["twin_unscaled"]
+    assert not undone["twin_scaled"] and not undone["defaults"]
+    assert max(rmse["twin_scaled"], rmse["defaults"]) < 0.5 * rmse["baseline"]
+    assert 0.5 * rmse["baseline"] < rmse["twin_unscaled"]
     # every attempt on the right road is taken
     assert all(m.accepted for m in runs["twin_scaled"].matches)
