@@ -934,6 +934,9 @@ class Driver:
         # what the outage's matches estimated of the route's errors, and where, goes back too
         estimated = slice(A_ROUTE, A_ROT_SHIFT + 2)
         f.aux[estimated] = twin.aux[estimated]
+        # and so does the mark that route updates were taken: the next fix is tested against
+        # dead reckoning's own covariance, not widened to its innovation
+        f.aux[A_INFLATE] = twin.aux[A_INFLATE]
         extra = {**rec.extra, "dr_separation_m": sep.metres}
         return dataclasses.replace(rec, accepted=False, extra=extra)
 

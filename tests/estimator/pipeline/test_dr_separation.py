@@ -129,3 +129,35 @@ def test_a_right_route_through_a_spiral_is_not_taken_for_a_wrong_one() -> None:
     assert 0.5 * rmse["baseline"] < rmse["twin_unscaled"]
     # every attempt on the right road is taken
     assert all(m.accepted for m in runs["twin_scaled"].matches)
+
+
+def test_an_undone_outage_leaves_the_next_fix_to_dead_reckoning() -> None:
+    """Drive 10 on a map that draws the road as driven: its first tunnel's updates are undone
+    (its twin's heading is off by three of its sigmas before the portal). The filter then
+    holds the twin's state, which took no route update, so the first fix after the tunnel is
+    tested against dead reckoning's own covariance, whose position-heading correlation
+    corrects the heading; widened to its innovation as after route updates, it left the
+    heading 0.5 deg off, the next portal's fixes turned it to 0.7 deg, and the second
+    tunnel's right updates were undone too (11.56 m against the baseline's 3.75)."""
+    road = build(drive_spec(10)).on_the_road()
+    assert road.log.truth is not None
+    both = run_methods(road, Params(), methods=("baseline", "proposed"))
+    runs = {n: both[n] for n in ("baseline", "proposed")}
+    prop = runs["proposed"]
+    (a1, b1), (a2, b2) = prop.degraded_intervals[:2]
+    undone = [m for m in prop.matches if "dr_separation_m" in m.extra]
+    assert undone and a1 <= undone[0].t <= b1
+    # the first fix used after the first tunnel narrows the heading, as dead reckoning's does
+    e = {n: r.epochs for n, r in runs.items()}
+    for name in ("baseline", "proposed"):
+        after = np.flatnonzero((e[name].t > b1) & e[name].gnss_used)
+        k = int(after[0])
+        assert e[name].yaw_sigma[k + 5] < e[name].yaw_sigma[k - 1]
+    # so the second tunnel's updates, on the right road, are taken
+    second = [m for m in prop.matches if a2 <= m.t <= b2]
+    assert second and all(m.accepted for m in second)
+    rmse = {}
+    for name, r in runs.items():
+        err, _ = outage_errors(r, road.log, road.frame)
+        rmse[name] = float(np.sqrt(np.mean(np.sum(err**2, axis=1))))
+    assert rmse["proposed"] <= rmse["baseline"] + 0.2
