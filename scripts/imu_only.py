@@ -27,6 +27,8 @@ table between the ``imu_only.py`` markers of ``docs/integrity.md``.
 from __future__ import annotations
 
 import argparse
+import functools
+import json
 import sys
 import time
 from pathlib import Path
@@ -67,9 +69,9 @@ RUNS: dict[str, tuple[str, dict[str, Any]]] = {
 MARK = "<!-- imu_only.py: {} -->"
 
 
-def run_case(case: tuple[str, Any]) -> dict[str, Any]:
+def run_case(case: tuple[str, Any], values: dict[str, Any] | None = None) -> dict[str, Any]:
     """One case's row (runs in a Dask worker): ("comma", (start, end)), ("sim", index) or
-    ("stress", index)."""
+    ("stress", index); ``values``: parameter values of the ``routefuse`` run (``--values``)."""
     import numpy as np
 
     from estimator.evaluation.metrics import method_metrics
@@ -118,8 +120,10 @@ def run_case(case: tuple[str, Any]) -> dict[str, Any]:
                 f"{sspec.bias_rotation_deg:+.1f} deg"
             )
         assert inputs.log.wheel is None and inputs.route is not None
-        for label, (method, values) in RUNS.items():
-            p = with_values(params, values)
+        for label, (method, run_values) in RUNS.items():
+            if label == "routefuse" and values:
+                run_values = {**run_values, **values}
+            p = with_values(params, run_values)
             run = run_methods(inputs, p, methods=(method,), outages=outages).runs[method]
             truth = method_metrics(run, inputs.route, inputs.log, params=p).truth
             rmse = truth.rmse_h_err_m if truth is not None else None
@@ -193,9 +197,16 @@ def main(argv: list[str] | None = None) -> int:
     parser.add_argument("--workers", type=int, default=2)
     parser.add_argument("--out", type=Path, default=None, help="folder for imu_only.csv")
     parser.add_argument("--write", action="store_true", help="write docs/integrity.md's table")
+    parser.add_argument(
+        "--values",
+        type=json.loads,
+        default={},
+        help='parameter values of the routefuse run, JSON ({"extensions.x": true})',
+    )
     args = parser.parse_args(argv)
     started = time.perf_counter()
-    rows = run_in_workers(run_case, cases(args.sims), workers=args.workers, label="imu_only")
+    job = functools.partial(run_case, values=args.values) if args.values else run_case
+    rows = run_in_workers(job, cases(args.sims), workers=args.workers, label="imu_only")
     text = table(rows)
     print(text)
     print(f"imu_only: {time.perf_counter() - started:.0f} s", file=sys.stderr)
