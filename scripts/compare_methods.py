@@ -113,6 +113,10 @@ BIASED_RUNS = {
         "proposed",
         {"extensions.map_turn_two_places": False},
     ),
+    "routefuse + `map_bias_portal_cut`": (
+        "proposed",
+        {"extensions.map_bias_portal_cut": True},
+    ),
     "routefuse + `offset.map_bias_walk_turned_only`": (
         "proposed",
         {"offset.map_bias_walk_turned_only": True},

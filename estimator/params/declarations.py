@@ -308,6 +308,15 @@ class OffsetParams:
         hi=3000,
         step=50,
     )
+    map_bias_portal_cut_s: float = param(
+        8.0,
+        "with extensions.map_bias_portal_cut, the map-bias fit's approach ends this long "
+        "before the outage starts",
+        unit="s",
+        lo=0,
+        hi=60,
+        step=1,
+    )
     map_bias_prior_sigma_m: float = param(
         10.0,
         "1-sigma of the map's bias before it is learned (what an unobserved direction keeps)",
@@ -634,6 +643,15 @@ class ExtensionParams:
         "significant itself: a short stretch that cannot tell the map's bias from zero is no "
         "evidence against the one a longer approach established, and the applied-or-not "
         "decision would otherwise flip on small changes of the stretch",
+    )
+    map_bias_portal_cut: bool = param(
+        False,
+        "the map-bias fit's approach (and its refinement) ends offset.map_bias_portal_cut_s "
+        "before the outage starts: receivers degrade near portals (multipath jumps, a slowly "
+        "growing bias reported as white), and the fixes there the filter still used would "
+        "otherwise pull the fitted lane, shift and rotation. Off: the robust GNSS test "
+        "already leaves most of them out, and the stretch also carries the approach's last "
+        "geometry (scripts/portal_fit.py; docs/integrity.md)",
     )
     dr_separation: bool = param(
         True,

@@ -545,8 +545,15 @@ class Driver:
             previous = (turned, self._route_estimate(aux)[0], tr.pivot_dist)
         tr.bias, tr.biased_route = None, None
         if self.p.extensions.map_bias:
+            s_bias, cut = s_last, self.p.offset.map_bias_portal_cut_s
+            if self.p.extensions.map_bias_portal_cut and len(last):
+                # the portal's degraded fixes the filter used: not the road driven
+                kept = np.flatnonzero(used & (rows[:, O_T] <= t_a - cut))
+                if len(kept):
+                    s_bias -= float(rows[last[-1], O_DIST]) - float(rows[kept[-1], O_DIST])
+                last = kept
             track = self._bias_track(rows, last)
-            tr.bias = self._learn_bias(track, s_last)
+            tr.bias = self._learn_bias(track, s_bias)
             if previous is not None and (
                 not np.isfinite(tr.bias.chi2)
                 or (self.p.extensions.map_bias_keep_applied and keeps_carried(previous[0], tr.bias))
@@ -578,7 +585,7 @@ class Driver:
                             _track_cov(track),
                             self.route,
                             carried=carried,
-                            s_guess=s_last,
+                            s_guess=s_bias,
                             params=self.p,
                             track_var=_track_var(track),
                             metres=float(track[-1, O_DIST]) - pivot_dist,

@@ -132,6 +132,19 @@ class Drive:
                 parts.append(across - across[0])
         return np.concatenate(parts) if parts else np.empty(0)
 
+    def map_bias_at(self, xy: np.ndarray) -> np.ndarray:
+        """(N, 2) the biased map's offset from the road at road points ``xy`` (N, 2): where
+        the map draws each point less where it is (the quantity ``extensions.map_bias`` learns
+        at its pivot, route minus road), from the drive's spec rather than from projections,
+        so that a fit's error can be told from the truth's lane offset."""
+        a = math.radians(self.spec.bias_rotation_deg)
+        pivot = _position_at(self.inputs.log, self.inputs.frame, 0.5 * sum(self.tunnels[0]))
+        turn = np.array([[math.cos(a) - 1.0, -math.sin(a)], [math.sin(a), math.cos(a) - 1.0]])
+        shift = self.spec.bias_along_m * _direction(self.road)
+        shift = shift + self.spec.bias_across_m * _left_of(self.road)
+        out: np.ndarray = (np.asarray(xy, np.float64) - pivot) @ turn.T + shift
+        return out
+
     def route_geojson(self) -> dict[str, Any]:
         """The drive's route file (biased or a trap, as drawn), its spec in the properties;
         ``routefuse simulate --stress N`` writes it beside the log."""

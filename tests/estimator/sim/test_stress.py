@@ -85,3 +85,15 @@ def test_the_map_drift_is_the_turn_along_the_tunnel() -> None:
     length = float(np.sum(np.hypot(*np.diff(inside, axis=0).T)))
     turn = np.radians(abs(drive.spec.bias_rotation_deg))
     assert abs(drift[len(inside) - 1]) == pytest.approx(turn * length, rel=0.2)
+
+
+def test_the_map_bias_field_is_where_the_map_draws_the_road() -> None:
+    drive = build(drive_spec(32))  # map turned +0.56 deg about the long tunnel's middle
+    route = drive.inputs.route
+    assert route is not None
+    xy = drive.road.point_at(np.linspace(100.0, drive.road.length - 100.0, 40))
+    drawn = xy + drive.map_bias_at(xy)
+    # each road point moved by the field lies on the map, and the field is not a constant
+    assert route.project(drawn).distance.max() < 0.05
+    bias = drive.map_bias_at(xy)
+    assert np.ptp(np.hypot(bias[:, 0], bias[:, 1])) > 20.0
