@@ -148,6 +148,30 @@ def _considered(i: int, last_considered: int, rot_est: bool, gsf_est: bool) -> b
 
 
 @kernel
+def _zero_considered_gain(
+    K: F64, m: int, last_considered: int, rot_est: bool, gsf_est: bool
+) -> None:
+    """A considered (Schmidt) state gets no gain."""
+    for i in range(NE):
+        if _considered(i, last_considered, rot_est, gsf_est):
+            for a in range(m):
+                K[i, a] = 0.0
+
+
+@kernel
+def _inject_gain(x: F64, y: F64, m: int, cfg: F64, K: F64, dx: F64) -> None:
+    """dx = K y (the wheel scale's share dropped unless it is a state), x <- x (+) dx."""
+    for i in range(NE):
+        acc = 0.0
+        for a in range(m):
+            acc += K[i, a] * y[a]
+        dx[i] = acc  # dx = K y
+    if not cfg[C_SCALE_ON] > 0:
+        dx[E_SCALE] = 0.0
+    inject(x, dx)  # x <- x (+) dx
+
+
+@kernel
 def _apply_gain(
     x: F64,
     P: F64,
@@ -177,10 +201,7 @@ def _apply_gain(
             for b in range(m):
                 acc += PHt[i, b] * Si[b, a]
             K[i, a] = acc  # K = P H^T S^-1
-    for i in range(NE):
-        if _considered(i, last_considered, rot_est, gsf_est):
-            for a in range(m):
-                K[i, a] = 0.0
+    _zero_considered_gain(K, m, last_considered, rot_est, gsf_est)
     for i in range(NE):
         considered = _considered(i, last_considered, rot_est, gsf_est)
         for j in range(i, NE):
@@ -193,14 +214,7 @@ def _apply_gain(
             v = P[i, j] - acc  # P <- P - K (P H^T)^T = P - K H P
             P[i, j] = v
             P[j, i] = v
-    for i in range(NE):
-        acc = 0.0
-        for a in range(m):
-            acc += K[i, a] * y[a]
-        dx[i] = acc  # dx = K y
-    if not cfg[C_SCALE_ON] > 0:
-        dx[E_SCALE] = 0.0
-    inject(x, dx)  # x <- x (+) dx
+    _inject_gain(x, y, m, cfg, K, dx)
 
 
 @kernel
@@ -249,10 +263,7 @@ def _apply_blind_gain(
             for b in range(m):
                 acc += (PHt[i, b] - ci * h[b]) * Si0[b, a]
             K[i, a] = acc  # K = P0 H^T (H P0 H^T + R)^-1
-    for i in range(NE):
-        if _considered(i, last_considered, rot_est, gsf_est):
-            for a in range(m):
-                K[i, a] = 0.0
+    _zero_considered_gain(K, m, last_considered, rot_est, gsf_est)
     KS = np.empty((NE, 3))
     for i in range(NE):
         for a in range(m):
@@ -268,14 +279,7 @@ def _apply_blind_gain(
             v = P[i, j] - acc  # P <- (I - K H) P (I - K H)^T + K R K^T
             P[i, j] = v
             P[j, i] = v
-    for i in range(NE):
-        acc = 0.0
-        for a in range(m):
-            acc += K[i, a] * y[a]
-        dx[i] = acc
-    if not cfg[C_SCALE_ON] > 0:
-        dx[E_SCALE] = 0.0
-    inject(x, dx)
+    _inject_gain(x, y, m, cfg, K, dx)
 
 
 @kernel
