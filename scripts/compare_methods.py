@@ -97,6 +97,10 @@ BIASED_RUNS = {
         "proposed",
         {"offset.map_turn_honest_prior": True},
     ),
+    "routefuse + `offset.map_bias_turn_prior`": (
+        "proposed",
+        {"offset.map_bias_turn_prior": True},
+    ),
     "routefuse + `map_turn_honest_consider`": (
         "proposed",
         {"extensions.map_turn_honest_consider": True},

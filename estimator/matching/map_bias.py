@@ -376,6 +376,26 @@ def _solve(A: F64, d: F64, weights: F64, P0: F64, nrm: F64, prior: F64) -> tuple
     return prior + K @ (d - A @ prior), C, K @ nrm
 
 
+def _turn_spread(route: Route, s_end: float, end: F64, params: Params) -> F64:
+    """(2, 2) the mean of ``J (end - q) (J (end - q))^T`` over the route points ``q`` within
+    ``offset.map_bias_track_m`` times ten of arc length ``s_end`` (``offset.map_bias_turn_prior``).
+    A map drawn turned by ``a`` about a point ``c`` is shifted by ``b0 + a J (end - c)`` at
+    ``end``: the prior of the map's shift (``offset.map_bias_cross_sigma_m``, a map's local
+    error) holds at ``c``, not at the approach's end, and with ``c`` unknown (anywhere a
+    turned map may be right, as :func:`_least_bias_ahead` takes it) the shift at the end has
+    the rotation's variance times this more. Held at the local prior instead, a map turned
+    about a point kilometres away, tens of metres off at the portal, is shrunk to its prior
+    and the fitted rotation and lane take up the difference (biased on a perfect track)."""
+    reach = 10.0 * params.offset.map_bias_track_m
+    s = np.arange(max(s_end - reach, 0.0), min(s_end + reach, route.length), 50.0)
+    if len(s) == 0:
+        return np.zeros((2, 2))
+    d = end - route.point_at(s)
+    jd = np.column_stack([-d[:, 1], d[:, 0]])
+    out: F64 = jd.T @ jd / len(s)
+    return out
+
+
 def _least_bias_ahead(
     route: Route, s_end: float, end: F64, offset: F64, rotation: float, params: Params
 ) -> float:
@@ -435,6 +455,7 @@ def learn_map_bias(
     # bias and lane (matched to a wrong lane, a bend's arc length is off): t . b = t . b1 + y,
     # the track's common error entering as -t . eps
     mean = np.array([op.map_bias_lane_prior_m, 0.0, 0.0, 0.0])
+    A_lat, d_lat, nrm_lat, w_lat = A, d, nrm, weights
     fit = _fit_with_shape(A, d, nrm, weights, P0, mean, xy, track_cov, route, end_s, params)
     if fit is None:
         return prior
@@ -507,6 +528,21 @@ def learn_map_bias(
             turn_var=turn_var,
             refused=refused,
         )
+    if rotated and op.map_bias_turn_prior:
+        # decided with the map's shift held at its local prior (the tests for another road
+        # and for significance as without the switch), the turned bias's values from the fit
+        # whose shift prior includes the rotation's share (:func:`_turn_spread`)
+        P0[1:3, 1:3] += P0[3, 3] * _turn_spread(route, end_s, end, params)
+        spread = _fit_with_shape(
+            A_lat, d_lat, nrm_lat, w_lat, P0, mean, xy, track_cov, route, end_s, params
+        )
+        if spread is not None:
+            u, C, G, _ = spread
+            total = C + G @ track_cov @ G.T
+            b, Cb = u[1:3], total[1:3, 1:3]
+            chi2 = float(b @ np.linalg.solve(Cb, b))
+            along_observed = _along_observed(normal_end, C[1:3, 1:3], params)
+            honest_turn_var = second_moment = float(C[3, 3])
     return MapBias(
         offset=b,
         rotation=float(u[3]),

@@ -437,6 +437,16 @@ class OffsetParams:
         "with that rotation and its sigma (a map drawn turned about a point far into a long "
         "tunnel is metres off at the portal)",
     )
+    map_bias_turn_prior: bool = param(
+        False,
+        "a map bias applied with its rotation takes its values from a fit whose prior on the "
+        "shift at the approach's end includes what the map's rotation "
+        "(offset.map_bias_rotation_sigma_deg) about an unknown point within "
+        "offset.map_bias_track_m times ten of route puts there (the decisions stay those of the "
+        "fit without it); without it a map turned about a point far from the portal, tens of "
+        "metres off there, has its shift held at offset.map_bias_cross_sigma_m and the fitted "
+        "lane and rotation take the rest",
+    )
     map_turn_honest_prior: bool = param(
         False,
         "with extensions.map_turn_estimate, an applied bias whose fitted rotation is not "
