@@ -612,8 +612,9 @@ class ExtensionParams:
     )
     along_drift_evidence: bool = param(
         False,
-        "where fixes inside an outage (a gap between tunnel tubes) correct the position along "
-        "the travel by more than the filter's along-track sigma, the excess is along-track drift "
+        "where an outage's updates (route pseudo-positions, the non-holonomic constraint in a "
+        "bend) correct the position along the travel over 10 s by more than the along-track "
+        "sigma the filter claimed before, the excess is along-track drift "
         "the model does not have (an accelerometer scale or mounting error, no odometer to bound "
         "it): estimate it as a velocity random walk along the travel (the excess variance over "
         "the time it grew in, covariance matching) and add it to the filter for the rest of the "
