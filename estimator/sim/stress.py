@@ -137,13 +137,17 @@ class Drive:
         the map draws each point less where it is (the quantity ``extensions.map_bias`` learns
         at its pivot, route minus road), from the drive's spec rather than from projections,
         so that a fit's error can be told from the truth's lane offset."""
-        a = math.radians(self.spec.bias_rotation_deg)
+        spec, points = self.spec, np.asarray(xy, np.float64)
         pivot = _position_at(self.inputs.log, self.inputs.frame, 0.5 * sum(self.tunnels[0]))
-        turn = np.array([[math.cos(a) - 1.0, -math.sin(a)], [math.sin(a), math.cos(a) - 1.0]])
-        shift = self.spec.bias_along_m * _direction(self.road)
-        shift = shift + self.spec.bias_across_m * _left_of(self.road)
-        out: np.ndarray = (np.asarray(xy, np.float64) - pivot) @ turn.T + shift
-        return out
+        drawn = _drawn(
+            points,
+            self.road,
+            spec.bias_along_m,
+            spec.bias_across_m,
+            spec.bias_rotation_deg,
+            pivot=pivot,
+        )
+        return drawn - points
 
     def route_geojson(self) -> dict[str, Any]:
         """The drive's route file (biased or a trap, as drawn), its spec in the properties;
@@ -218,11 +222,25 @@ def map_biased(
     """The road as a biased map draws it: rotated by ``rotation_deg`` about ``pivot`` (the
     first tunnel's middle: the offset there is the one drawn, the rotation turns it along the
     tunnel), then moved ``along_m`` along its overall direction and ``across_m`` to its left."""
+    xy = _drawn(road.xy, road, along_m, across_m, rotation_deg, pivot=pivot)
+    return Route(xy, name=road.name, source=road.source)
+
+
+def _drawn(
+    xy: np.ndarray,
+    road: Route,
+    along_m: float,
+    across_m: float,
+    rotation_deg: float,
+    *,
+    pivot: np.ndarray,
+) -> np.ndarray:
+    """Where a map biased as :func:`map_biased` says draws the road's points ``xy``."""
     a = math.radians(rotation_deg)
     rot = np.array([[math.cos(a), -math.sin(a)], [math.sin(a), math.cos(a)]])
-    xy = road.xy if a == 0.0 else (road.xy - pivot) @ rot.T + pivot
-    xy = xy + along_m * _direction(road) + across_m * _left_of(road)
-    return Route(xy, name=road.name, source=road.source)
+    moved = xy if a == 0.0 else (xy - pivot) @ rot.T + pivot
+    out: np.ndarray = moved + along_m * _direction(road) + across_m * _left_of(road)
+    return out
 
 
 def moved_route(road: Route, along_m: float = 10.0, across_m: float = 3.5) -> Route:
