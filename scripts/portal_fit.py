@@ -29,14 +29,15 @@ REPO = Path(__file__).resolve().parents[1]
 sys.path.insert(0, str(REPO))
 
 import estimator.pipeline.driver as driver  # noqa: E402
-from estimator.filter.layout import O_GNSS, O_T  # noqa: E402
+from estimator.filter.layout import O_GNSS, O_POS, O_T  # noqa: E402
 from estimator.matching.map_bias import MapBias  # noqa: E402
 from estimator.params import Params, with_values  # noqa: E402
 from estimator.pipeline import run_methods  # noqa: E402
+from estimator.sim.sensors import GnssErrorModel  # noqa: E402
 from estimator.sim.stress import Drive, build, drive_spec  # noqa: E402
 
-DEGRADED_S = 8.0
-"""the simulator's degraded stretch before each tunnel entry (GnssErrorModel)"""
+DEGRADED_S = GnssErrorModel().degraded_before_s
+"""the simulator's degraded stretch before each tunnel entry"""
 
 
 def _caught(drive: Drive, params: Params) -> list[tuple[np.ndarray, dict[str, Any]]]:
@@ -136,7 +137,7 @@ def report(index: int, params: Params) -> None:
 
         keep = t <= entry - DEGRADED_S
         span = (fix_t >= t[0]) & (fix_t <= t[-1])
-        est = rows[:, 1:3]
+        est = rows[:, O_POS : O_POS + 2]
         variants = {
             "estimate (as run)": (est, kw["track_var"]),
             "estimate, cut 8 s": (est[keep], kw["track_var"][keep]),
