@@ -700,7 +700,9 @@ def _refined_turn(
     pivot, which one approach cannot tell from the heading's drift. Where ``r`` passes the
     significance test (``offset.map_turn_two_places_min_sigmas``) the bias is moved to the
     stretch's end (the new pivot) with the rotation ``carried.rotation + r`` and its sigma;
-    otherwise None (the plain refine follows)."""
+    otherwise None (the plain refine follows). Where ``carried`` applies a rotation and
+    ``extensions.map_turn_two_places_applied``, ``r`` corrects it whatever its significance:
+    with the applied rotation's own variance as its prior the fit is its posterior."""
     op = params.offset
     end = xy[-1]
     D = end - carried.pivot
@@ -724,9 +726,11 @@ def _refined_turn(
         return None
     u, C, G, _ = fit
     total = C + G @ track_cov @ G.T
-    if (
-        abs(u[0]) > op.max_offset_m
-        or u[3] ** 2 / total[3, 3] < op.map_turn_two_places_min_sigmas**2
+    # a rotation already applied is corrected by its posterior; the test decides whether to
+    # apply one at all
+    corrects = params.extensions.map_turn_two_places_applied and carried.rotation != 0.0
+    if abs(u[0]) > op.max_offset_m or (
+        not corrects and u[3] ** 2 / total[3, 3] < op.map_turn_two_places_min_sigmas**2
     ):
         return None
     here = carried.offset + carried.rotation * jd

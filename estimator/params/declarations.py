@@ -716,6 +716,15 @@ class ExtensionParams:
         "approach cannot tell a map's turn from the heading's drift; two GNSS-measured shifts "
         "kilometres apart can",
     )
+    map_turn_two_places_applied: bool = param(
+        False,
+        "where the carried bias applies a rotation, the rotation learned from two places "
+        "(extensions.map_turn_two_places) corrects it whatever its significance: its prior is "
+        "the applied rotation's own variance, so the fit is that rotation's posterior, and "
+        "the test against zero (offset.map_turn_two_places_min_sigmas) is for whether to "
+        "apply a rotation at all; refused, the plain refine keeps the rotation the previous "
+        "outage's matches left and extrapolates it from the first pivot",
+    )
     map_turn_estimate: bool = param(
         True,
         "estimate the map's rotation error in the outage instead of only considering it, "

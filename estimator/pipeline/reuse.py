@@ -205,6 +205,8 @@ def resume(d: Driver, old: ReuseState, old_params: Params, *, reuse_matching: bo
         and p.extensions.map_turn_consider == old_params.extensions.map_turn_consider
         and p.extensions.map_turn_estimate == old_params.extensions.map_turn_estimate
         and p.extensions.map_turn_two_places == old_params.extensions.map_turn_two_places
+        and p.extensions.map_turn_two_places_applied
+        == old_params.extensions.map_turn_two_places_applied
         and p.extensions.map_turn_honest_consider == old_params.extensions.map_turn_honest_consider
         and p.extensions.map_turn_release == old_params.extensions.map_turn_release
         and p.extensions.geometry_covariance == old_params.extensions.geometry_covariance

@@ -106,3 +106,58 @@ def test_switched_off_the_rotation_is_not_learned() -> None:
     carried, out, _ = refine(-0.3, off)
     assert out.rotation == 0.0
     assert out.pivot is carried.pivot
+
+
+def applied_place(rotation_deg: float, params: Params) -> tuple[MapBias, MapBias]:
+    """A bias that applies a rotation of ``rotation_deg`` +- 0.14 deg (the map is turned by
+    -0.3 deg), carried 2.35 km on and refined there (:func:`refine`'s map and stretch)."""
+    truth = road()
+    pivot = truth.point_at(np.array([S_PIVOT]))[0]
+    shift = np.array([4.0, 2.0])
+    route = drawn(truth, shift, -0.3, pivot)
+    sigma = math.radians(0.14)
+    learned = map_bias(
+        shift,
+        rotation=math.radians(rotation_deg),
+        rotation_sigma=sigma,
+        pivot=pivot,
+        lane=0.0,
+        measured_cov=1.5**2 * np.eye(2),
+        chi2=99.0,
+        along_observed=True,
+        turn_var=sigma**2,
+        turn_second_moment=sigma**2,
+    )
+    carried = carried_bias(
+        learned,
+        shift,
+        position=truth.point_at(np.array([S_END + 20.0]))[0],
+        lane_seen=0.0,
+        normal=np.array([0.0, 1.0]),
+        metres=S_END - S_PIVOT,
+        params=params,
+    )
+    xy = truth.point_at(np.arange(S_END - 300.0, S_END + 1e-9, 1.0))
+    out = refined_bias(
+        xy,
+        GNSS_COV,
+        route,
+        carried=carried,
+        s_guess=float(route.project(xy[-1:]).s[0]),
+        params=params,
+        metres=S_END - S_PIVOT,
+    )
+    return carried, out
+
+
+def test_an_applied_rotation_is_corrected_below_the_test() -> None:
+    # 0.08 deg off: under two of the applied rotation's sigmas, which the test would refuse
+    on = with_values(P, {"extensions.map_turn_two_places_applied": True})
+    carried, out = applied_place(-0.22, on)
+    assert out.pivot is not carried.pivot
+    assert abs(out.rotation - math.radians(-0.3)) < 0.5 * math.radians(0.08)
+    assert out.rotation_sigma < carried.rotation_sigma
+    off = with_values(P, {"extensions.map_turn_two_places_applied": False})
+    carried, out = applied_place(-0.22, off)
+    assert out.pivot is carried.pivot
+    assert out.rotation == carried.rotation
