@@ -97,9 +97,9 @@ BIASED_RUNS = {
         "proposed",
         {"offset.map_turn_honest_prior": True},
     ),
-    "routefuse + `offset.map_bias_turn_prior`": (
+    "routefuse, `offset.map_bias_turn_prior` off": (
         "proposed",
-        {"offset.map_bias_turn_prior": True},
+        {"offset.map_bias_turn_prior": False},
     ),
     "routefuse + `map_turn_honest_consider`": (
         "proposed",

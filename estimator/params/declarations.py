@@ -438,7 +438,7 @@ class OffsetParams:
         "tunnel is metres off at the portal)",
     )
     map_bias_turn_prior: bool = param(
-        False,
+        True,
         "a map bias applied with its rotation takes its values from a fit whose prior on the "
         "shift at the approach's end includes what the map's rotation "
         "(offset.map_bias_rotation_sigma_deg) about an unknown point within "
@@ -717,7 +717,7 @@ class ExtensionParams:
         "kilometres apart can",
     )
     map_turn_two_places_applied: bool = param(
-        False,
+        True,
         "where the carried bias applies a rotation, the rotation learned from two places "
         "(extensions.map_turn_two_places) corrects it whatever its significance: its prior is "
         "the applied rotation's own variance, so the fit is that rotation's posterior, and "
