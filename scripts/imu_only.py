@@ -69,9 +69,23 @@ RUNS: dict[str, tuple[str, dict[str, Any]]] = {
 MARK = "<!-- imu_only.py: {} -->"
 
 
-def run_case(case: tuple[str, Any], values: dict[str, Any] | None = None) -> dict[str, Any]:
+def run_values_of(
+    label: str, run_values: dict[str, Any], values: dict[str, Any] | None, everywhere: bool
+) -> dict[str, Any]:
+    """The parameter values of run ``label``: its own (``RUNS``), with ``values`` on top for the
+    ``routefuse`` run, or for every run with ``everywhere``."""
+    if values and (everywhere or label == "routefuse"):
+        return {**run_values, **values}
+    return run_values
+
+
+def run_case(
+    case: tuple[str, Any], values: dict[str, Any] | None = None, everywhere: bool = False
+) -> dict[str, Any]:
     """One case's row (runs in a Dask worker): ("comma", (start, end)), ("sim", index) or
-    ("stress", index); ``values``: parameter values of the ``routefuse`` run (``--values``)."""
+    ("stress", index); ``values``: parameter values of the ``routefuse`` run (``--values``),
+    or of every run with ``everywhere`` (``--values-everywhere``: a filter switch as a
+    default would be, the baseline's dead reckoning included)."""
     import numpy as np
 
     from estimator.evaluation.metrics import method_metrics
@@ -121,9 +135,7 @@ def run_case(case: tuple[str, Any], values: dict[str, Any] | None = None) -> dic
             )
         assert inputs.log.wheel is None and inputs.route is not None
         for label, (method, run_values) in RUNS.items():
-            if label == "routefuse" and values:
-                run_values = {**run_values, **values}
-            p = with_values(params, run_values)
+            p = with_values(params, run_values_of(label, run_values, values, everywhere))
             run = run_methods(inputs, p, methods=(method,), outages=outages).runs[method]
             truth = method_metrics(run, inputs.route, inputs.log, params=p).truth
             rmse = truth.rmse_h_err_m if truth is not None else None
@@ -203,9 +215,18 @@ def main(argv: list[str] | None = None) -> int:
         default={},
         help='parameter values of the routefuse run, JSON ({"extensions.x": true})',
     )
+    parser.add_argument(
+        "--values-everywhere",
+        action="store_true",
+        help="give --values to every run (baseline too), as a default would be",
+    )
     args = parser.parse_args(argv)
     started = time.perf_counter()
-    job = functools.partial(run_case, values=args.values) if args.values else run_case
+    job = (
+        functools.partial(run_case, values=args.values, everywhere=args.values_everywhere)
+        if args.values
+        else run_case
+    )
     rows = run_in_workers(job, cases(args.sims), workers=args.workers, label="imu_only")
     text = table(rows)
     print(text)

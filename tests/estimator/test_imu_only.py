@@ -381,3 +381,18 @@ def test_a_simulated_drive_losing_gnss_a_few_seconds_in_is_dead_reckoned_there()
     ungated = _cautious_but(**{"extensions.calibrated_approach": False})
     again = run_methods(inputs, ungated, methods=("proposed",), outages=(outage,))
     assert [m for m in again["proposed"].matches if m.t < end]
+
+
+def test_the_scripts_values_reach_routefuse_or_with_everywhere_every_run() -> None:
+    import sys
+    from pathlib import Path
+
+    sys.path.insert(0, str(Path(__file__).resolve().parents[2] / "scripts"))
+    from imu_only import RUNS, run_values_of
+
+    values = {"extensions.x": True}
+    for label, (_, own) in RUNS.items():
+        only = run_values_of(label, own, values, everywhere=False)
+        assert (only == {**own, **values}) == (label == "routefuse")
+        assert run_values_of(label, own, values, everywhere=True) == {**own, **values}
+        assert run_values_of(label, own, None, everywhere=True) == own
