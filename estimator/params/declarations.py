@@ -431,7 +431,7 @@ class OffsetParams:
         "dead-reckoned drift for a change of the map",
     )
     map_bias_turned_rescue: bool = param(
-        False,
+        True,
         "a bias that the test for another road (offset.map_bias_max_prior_sigmas) refuses as a "
         "shift but passes with the fitted rotation, two sigmas from zero if not three, is applied "
         "with that rotation and its sigma (a map drawn turned about a point far into a long "
