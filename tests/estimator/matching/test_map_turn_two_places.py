@@ -58,14 +58,10 @@ def first_place(shift: np.ndarray, pivot: np.ndarray, params: Params) -> MapBias
     )
 
 
-def refine(rotation_deg: float, params: Params = P) -> tuple[MapBias, MapBias, Route]:
-    truth = road()
-    pivot = truth.point_at(np.array([S_PIVOT]))[0]
-    shift = np.array([4.0, 2.0])
-    route = drawn(truth, shift, rotation_deg, pivot)
-    carried = first_place(shift, pivot, params)
+def refined_at_end(truth: Route, route: Route, carried: MapBias, params: Params) -> MapBias:
+    """``carried`` refined by the GNSS track of the last 300 m before ``S_END``."""
     xy = truth.point_at(np.arange(S_END - 300.0, S_END + 1e-9, 1.0))
-    out = refined_bias(
+    return refined_bias(
         xy,
         GNSS_COV,
         route,
@@ -74,6 +70,15 @@ def refine(rotation_deg: float, params: Params = P) -> tuple[MapBias, MapBias, R
         params=params,
         metres=S_END - S_PIVOT,
     )
+
+
+def refine(rotation_deg: float, params: Params = P) -> tuple[MapBias, MapBias, Route]:
+    truth = road()
+    pivot = truth.point_at(np.array([S_PIVOT]))[0]
+    shift = np.array([4.0, 2.0])
+    route = drawn(truth, shift, rotation_deg, pivot)
+    carried = first_place(shift, pivot, params)
+    out = refined_at_end(truth, route, carried, params)
     return carried, out, route
 
 
@@ -137,16 +142,7 @@ def applied_place(rotation_deg: float, params: Params) -> tuple[MapBias, MapBias
         metres=S_END - S_PIVOT,
         params=params,
     )
-    xy = truth.point_at(np.arange(S_END - 300.0, S_END + 1e-9, 1.0))
-    out = refined_bias(
-        xy,
-        GNSS_COV,
-        route,
-        carried=carried,
-        s_guess=float(route.project(xy[-1:]).s[0]),
-        params=params,
-        metres=S_END - S_PIVOT,
-    )
+    out = refined_at_end(truth, route, carried, params)
     return carried, out
 
 
