@@ -648,7 +648,7 @@ class ExtensionParams:
         "evidence that the map is exact",
     )
     unapplied_bias_lane_tie: bool = param(
-        False,
+        True,
         "with extensions.unapplied_bias_consider, the lane offset kept with a bias not applied "
         "(the cross-track offset seen near the portal, lane and map together) is tied to the "
         "considered map error (a map shifted by b leaves that lane off by n . b, n the "
