@@ -111,6 +111,10 @@ class MapBias:
     refused: MapBiasRefusal | None = None
     """why ``measured`` was not applied whatever its significance: too large for a map's
     error, or with a lane too far from the route (another road); None otherwise"""
+    tied: bool = False
+    """not applied, its lane (the offset seen near the portal, lane and map together) is tied
+    to the considered map error (``extensions.unapplied_bias_lane_tie``); the outage's
+    pseudo-positions estimate both with ``extensions.unapplied_bias_estimate``"""
 
     @property
     def significant(self) -> bool:

@@ -647,6 +647,20 @@ class ExtensionParams:
         "second moment less its own covariance): a test that fails to reject zero is no "
         "evidence that the map is exact",
     )
+    unapplied_bias_lane_tie: bool = param(
+        True,
+        "with extensions.unapplied_bias_consider, the lane offset kept with a bias not applied "
+        "(the cross-track offset seen near the portal, lane and map together) is tied to the "
+        "considered map error (a map shifted by b leaves that lane off by n . b, n the "
+        "portal's normal): the pseudo-positions' covariance grows across where the road turns "
+        "away from the portal's direction, instead of holding the map's shift as a lane",
+    )
+    unapplied_bias_estimate: bool = param(
+        False,
+        "with extensions.unapplied_bias_lane_tie, the outage's pseudo-positions also estimate "
+        "the tied lane and map errors of a bias not applied (offset.map_bias_estimated): a "
+        "bend tells the map's shift from the lane",
+    )
     map_bias_keep_applied: bool = param(
         True,
         "a map bias applied in the previous outage is carried to the next (refined by the "

@@ -464,7 +464,8 @@ class Driver:
             gain, cov = bias.gain.copy(), bias.cov.copy()
             if not self.p.extensions.lane_offset_state:
                 gain[0], cov[0], cov[:, 0] = 0.0, 0.0, 0.0
-            estimate = bias.significant and route_errors_estimated(self.p)
+            tied_estimated = bias.tied and self.p.extensions.unapplied_bias_estimate
+            estimate = (bias.significant or tied_estimated) and route_errors_estimated(self.p)
             clone_route_errors(P, aux, self.inp.cfg, gain, cov, estimate)
         elif self.p.extensions.lane_offset_state and self.track.s is not None:
             t = self.route.tangent_at(self.track.s)[0]
@@ -597,7 +598,9 @@ class Driver:
                     tr.bias = unbiased(self.p, lane=tr.lane, normal=normal, learned=bias)
             tr.lane = tr.bias.lane
             if self.p.extensions.unapplied_bias_consider:
-                tr.bias = unapplied_considered(tr.bias)
+                tr.bias = unapplied_considered(
+                    tr.bias, tied=self.p.extensions.unapplied_bias_lane_tie
+                )
 
     def _offset_near_portal(
         self,
@@ -1080,7 +1083,7 @@ def honest_turn_consider(bias: MapBias | None, var: float) -> float:
     return max(var, bias.turn_second_moment)
 
 
-def unapplied_considered(bias: MapBias) -> MapBias:
+def unapplied_considered(bias: MapBias, *, tied: bool = False) -> MapBias:
     """``bias`` with, when it was learned but not applied, the bias seen added to the
     map-bias error the outage's pseudo-positions carry (``extensions.unapplied_bias_consider``).
 
@@ -1091,14 +1094,32 @@ def unapplied_considered(bias: MapBias) -> MapBias:
     moment of what was measured, ``m m^T``, less what the measurement's own covariance ``C``
     explains (negative directions dropped), so a right map whose bias is within its noise
     gains nothing. As a considered state (never estimated) it is shared by all of the
-    outage's matches, so repeating them does not average it away."""
+    outage's matches, so repeating them does not average it away.
+
+    ``tied`` (``extensions.unapplied_bias_lane_tie``): the lane kept with a bias not applied is
+    the cross-track offset seen near the portal, ``l - n . b`` with ``n`` the route's left
+    normal there, so a map shifted by ``b`` leaves it off by ``n . b``: the lane's error is
+    tied to the map's, and at the portal the two cancel across the road (the offset seen is
+    right there) while where the road turns they do not, and the pseudo-positions' covariance
+    says so; without it the lane held through a spiral carries the map's shift as a lane
+    across every later normal with the shape noise's sigma. Not for a bias refused as another
+    road. With ``extensions.unapplied_bias_estimate`` the outage's matches estimate both."""
     m, c = bias.measured, bias.measured_cov
     if bias.significant or not (np.all(np.isfinite(m)) and np.all(np.isfinite(c))):
         return bias
     w, v = np.linalg.eigh(np.outer(m, m) - 0.5 * (c + c.T))
+    seen = (v * np.maximum(w, 0.0)) @ v.T
     cov = bias.cov.copy()
-    cov[1:, 1:] += (v * np.maximum(w, 0.0)) @ v.T
-    return dataclasses.replace(bias, cov=cov)
+    cov[1:, 1:] += seen
+    if not (tied and bias.refused is None and np.any(w > 0.0)):
+        return dataclasses.replace(bias, cov=cov)
+    normal = bias.gain[0]
+    # d_lane = n . d_map: the pseudo-position's error d_map - n d_lane is the map's shift along
+    # the portal's road there, and grows across as the road turns away from it
+    cov[0, 0] += float(normal @ seen @ normal)
+    cov[0, 1:] += normal @ seen
+    cov[1:, 0] += seen @ normal
+    return dataclasses.replace(bias, cov=cov, tied=True)
 
 
 def release_turn(x: F64, P: F64, pivot: F64, var: float) -> None:

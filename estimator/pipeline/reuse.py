@@ -201,6 +201,8 @@ def resume(d: Driver, old: ReuseState, old_params: Params, *, reuse_matching: bo
         and p.extensions.lane_offset_state == old_params.extensions.lane_offset_state
         and p.extensions.map_bias == old_params.extensions.map_bias
         and p.extensions.unapplied_bias_consider == old_params.extensions.unapplied_bias_consider
+        and p.extensions.unapplied_bias_lane_tie == old_params.extensions.unapplied_bias_lane_tie
+        and p.extensions.unapplied_bias_estimate == old_params.extensions.unapplied_bias_estimate
         and p.extensions.map_bias_keep_applied == old_params.extensions.map_bias_keep_applied
         and p.extensions.map_turn_consider == old_params.extensions.map_turn_consider
         and p.extensions.map_turn_estimate == old_params.extensions.map_turn_estimate
