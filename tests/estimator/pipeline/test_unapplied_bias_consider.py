@@ -60,7 +60,7 @@ def test_a_map_turned_in_a_long_tunnel_is_no_worse_than_dead_reckoning() -> None
     the road were accepted and set the heading to the map's (NEES 35, 22 m against the
     baseline's 9 m). Carried as map error, the run is no worse than dead reckoning and its
     NEES honest. (Since ``offset.map_bias_turned_rescue`` is on the bias is applied with its
-    rotation; the test takes it off to keep the bias unapplied.)"""
+    rotation; the test takes it off to keep the bias unapplied, and checks the default too.)"""
     key = "extensions.unapplied_bias_consider"
     unapplied = {"offset.map_bias_turned_rescue": False}
     base_rmse, _ = _truth_figures(0, "baseline", {})
@@ -75,6 +75,10 @@ def test_a_map_turned_in_a_long_tunnel_is_no_worse_than_dead_reckoning() -> None
         0, "proposed", {**unapplied, key: False, "extensions.map_turn_consider": False}
     )
     assert neither_nees > CHI2_2DOF_95
+    # applied with the rotation that explains it (the default), it beats dead reckoning
+    rescued, rescued_nees = _truth_figures(0, "proposed", {})
+    assert rescued < base_rmse - 1.0
+    assert rescued_nees <= CHI2_2DOF_95
 
 
 def test_a_tied_lane_cancels_the_map_shift_across_the_portal_alone() -> None:
