@@ -187,6 +187,32 @@ def same_outcome(new: MatchRecord, old: MatchRecord) -> bool:
     )
 
 
+MATCHING_EXTENSIONS = (
+    "heading_observation",
+    "lane_offset_state",
+    "map_bias",
+    "unapplied_bias_consider",
+    "unapplied_bias_lane_tie",
+    "unapplied_bias_estimate",
+    "map_bias_keep_applied",
+    "map_turn_consider",
+    "map_turn_estimate",
+    "map_turn_two_places",
+    "map_turn_two_places_applied",
+    "map_turn_honest_consider",
+    "map_turn_release",
+    "geometry_covariance",
+    "weak_along_track",
+    "reanchor",
+    "gap_reacquire",
+    "calibrated_approach",
+    "along_drift_evidence",
+    "dr_separation",
+)
+"""The extensions that decide where an outage's attempts fall or what they carry: changed, a
+re-run replays from the first outage instead of attempt by attempt."""
+
+
 def resume(d: Driver, old: ReuseState, old_params: Params, *, reuse_matching: bool) -> None:
     """Replay the old run's checkpoints with ``d``'s matching parameters until one gives a
     different outcome, then run live from there."""
@@ -197,28 +223,11 @@ def resume(d: Driver, old: ReuseState, old_params: Params, *, reuse_matching: bo
     same_trigger = (
         p.trigger == old_params.trigger
         and p.window.spacing_m == old_params.window.spacing_m
-        and p.extensions.heading_observation == old_params.extensions.heading_observation
-        and p.extensions.lane_offset_state == old_params.extensions.lane_offset_state
-        and p.extensions.map_bias == old_params.extensions.map_bias
-        and p.extensions.unapplied_bias_consider == old_params.extensions.unapplied_bias_consider
-        and p.extensions.unapplied_bias_lane_tie == old_params.extensions.unapplied_bias_lane_tie
-        and p.extensions.unapplied_bias_estimate == old_params.extensions.unapplied_bias_estimate
-        and p.extensions.map_bias_keep_applied == old_params.extensions.map_bias_keep_applied
-        and p.extensions.map_turn_consider == old_params.extensions.map_turn_consider
-        and p.extensions.map_turn_estimate == old_params.extensions.map_turn_estimate
-        and p.extensions.map_turn_two_places == old_params.extensions.map_turn_two_places
-        and p.extensions.map_turn_two_places_applied
-        == old_params.extensions.map_turn_two_places_applied
-        and p.extensions.map_turn_honest_consider == old_params.extensions.map_turn_honest_consider
-        and p.extensions.map_turn_release == old_params.extensions.map_turn_release
-        and p.extensions.geometry_covariance == old_params.extensions.geometry_covariance
-        and p.extensions.weak_along_track == old_params.extensions.weak_along_track
+        and all(
+            getattr(p.extensions, name) == getattr(old_params.extensions, name)
+            for name in MATCHING_EXTENSIONS
+        )
         and p.pseudo.weak_along_disagreement == old_params.pseudo.weak_along_disagreement
-        and p.extensions.reanchor == old_params.extensions.reanchor
-        and p.extensions.gap_reacquire == old_params.extensions.gap_reacquire
-        and p.extensions.calibrated_approach == old_params.extensions.calibrated_approach
-        and p.extensions.along_drift_evidence == old_params.extensions.along_drift_evidence
-        and p.extensions.dr_separation == old_params.extensions.dr_separation
         and (
             not p.extensions.dr_separation
             or (

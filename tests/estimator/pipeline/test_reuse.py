@@ -222,3 +222,12 @@ def test_reuse_with_the_along_drift_evidence_flipped_gives_the_same_run_as_start
     fresh = run(inputs.log, inputs.route, params(True), frame=inputs.frame)
     assert not np.array_equal(old.epochs.position, fresh.epochs.position)
     assert _same_epochs(again, fresh)
+
+
+def test_the_replay_compares_extensions_that_exist() -> None:
+    from estimator.params.declarations import ExtensionParams
+    from estimator.pipeline.reuse import MATCHING_EXTENSIONS
+
+    fields = {f.name for f in dataclasses.fields(ExtensionParams)}
+    assert set(MATCHING_EXTENSIONS) <= fields
+    assert len(set(MATCHING_EXTENSIONS)) == len(MATCHING_EXTENSIONS)
