@@ -101,6 +101,10 @@ BIASED_RUNS = {
         "proposed",
         {"offset.map_bias_turn_prior": False},
     ),
+    "routefuse, `offset.map_bias_far_turned` off": (
+        "proposed",
+        {"offset.map_bias_far_turned": False},
+    ),
     "routefuse + `map_turn_honest_consider`": (
         "proposed",
         {"extensions.map_turn_honest_consider": True},

@@ -425,6 +425,103 @@ def _least_bias_ahead(
     return math.sqrt(float(np.min(np.einsum("ki,ij,kj->k", bias, inv, bias))))
 
 
+def _turned_rows(
+    xy: F64, route: Route, end_s: float, track_var: F64 | None, track_cov: F64, params: Params
+) -> tuple[F64, F64, F64, F64] | None:
+    """The cross-track rows of the fit (``A``, ``d``, ``nrm``, ``weights``; unknowns lane,
+    shift E, N at the approach's end and a rotation about it) of the approach ``xy`` against
+    ``route``; None where it is too short (:func:`_lateral_rows`)."""
+    rows = _lateral_rows(xy, route, end_s, track_var, track_cov, params)
+    if rows is None or rows.span < params.window.length_m:
+        return None
+    rel = rows.points - xy[-1]
+    turned = np.column_stack([-rel[:, 1], rel[:, 0]])  # J (x - x_e)
+    nrm = rows.normal
+    A = np.column_stack([np.ones(len(rows.d)), -nrm, -np.sum(nrm * turned, axis=1)])
+    return A, rows.d, nrm, rows.weights
+
+
+def _relinearised_fit(
+    xy: F64,
+    route: Route,
+    end_s: float,
+    track_var: F64 | None,
+    track_cov: F64,
+    P0: F64,
+    mean: F64,
+    params: Params,
+    *,
+    passes: int,
+) -> tuple[F64, F64, F64, tuple[F64, F64, F64, F64]] | None:
+    """:func:`_fit_with_shape` on the approach's rows (:func:`_turned_rows`) repeated
+    ``passes`` times, each against the route moved back by the fit so far (Gauss-Newton: the
+    increment's prior is the prior less what is moved back, and the bias field being linear
+    in shift and rotation about the end, the increments add). Distances to a route tens of
+    metres off are not linear in the shift where the route bends."""
+    moved_by = np.zeros(4)
+    fit = None
+    for _ in range(passes):
+        moved = route
+        s_moved = end_s
+        if fit is not None:
+            moved = Route(xy_moved_back(route.xy, moved_by[1:3], float(moved_by[3]), xy[-1]))
+            s_moved = float(moved.project(xy[-1:], end_s, params.window.route_search_m).s[0])
+        rows = _turned_rows(xy, moved, s_moved, track_var, track_cov, params)
+        if rows is None:
+            return None
+        step = _fit_with_shape(*rows, P0, mean - moved_by, xy, track_cov, moved, s_moved, params)
+        if step is None:
+            return None
+        u, C, G, used = step
+        fit = (u + moved_by, C, G, used)
+        moved_by = np.concatenate([[0.0], fit[0][1:]])
+    return fit
+
+
+def _far_turned_fit(
+    xy: F64,
+    route: Route,
+    end_s: float,
+    track_var: F64 | None,
+    track_cov: F64,
+    P0: F64,
+    mean: F64,
+    params: Params,
+) -> tuple[F64, F64, F64, tuple[F64, F64, F64, F64]] | None:
+    """The fit with the shift's prior widened by the rotation's share (:func:`_turn_spread`)
+    for an approach the fit held at the map's local prior cannot follow
+    (``offset.map_bias_far_turned``): a map drawn turned about a point kilometres ahead lies
+    tens of metres off at the portal, more than the local prior lets the shift take. Fitted
+    in ``offset.map_bias_far_turned_passes`` passes (:func:`_relinearised_fit`), kept only when
+    the rotation is significant and makes the shift one the map may have somewhere ahead
+    (:func:`_least_bias_ahead`); a parallel road, off by as much everywhere, stays refused."""
+    op = params.offset
+    wide = P0.copy()
+    wide[1:3, 1:3] += wide[3, 3] * _turn_spread(route, end_s, xy[-1], params)
+    fit = _relinearised_fit(
+        xy,
+        route,
+        end_s,
+        track_var,
+        track_cov,
+        wide,
+        mean,
+        params,
+        passes=op.map_bias_far_turned_passes,
+    )
+    if fit is None:
+        return None
+    u, C, G, _ = fit
+    total = C + G @ track_cov @ G.T
+    if u[3] ** 2 / total[3, 3] < op.map_bias_min_sigmas**2 or abs(u[0]) > op.max_offset_m:
+        return None
+    if _least_bias_ahead(route, end_s, xy[-1], u[1:3], float(u[3]), params) > (
+        op.map_bias_max_prior_sigmas
+    ):
+        return None
+    return fit
+
+
 def learn_map_bias(
     track_xy: F64,
     track_cov: F64,
@@ -449,14 +546,11 @@ def learn_map_bias(
     prior = prior_bias(params, lane=lane_offset, normal=normal_end)
     if len(xy) < 2:
         return prior
-    rows = _lateral_rows(xy, route, end_s, track_var, track_cov, params)
-    if rows is None or rows.span < params.window.length_m:
+    rows = _turned_rows(xy, route, end_s, track_var, track_cov, params)
+    if rows is None:
         return prior
     end = xy[-1]
-    d, nrm, weights = rows.d, rows.normal, rows.weights
-    rel = rows.points - end
-    turned = np.column_stack([-rel[:, 1], rel[:, 0]])  # J (x - x_e)
-    A = np.column_stack([np.ones(len(d)), -nrm, -np.sum(nrm * turned, axis=1)])
+    A, d, nrm, weights = rows
     P0 = np.zeros((4, 4))
     P0[0, 0] = op.map_bias_lane_sigma_m**2
     P0[1:3, 1:3] = _prior_cov(params, normal_end)
@@ -465,8 +559,11 @@ def learn_map_bias(
     # bias and lane (matched to a wrong lane, a bend's arc length is off): t . b = t . b1 + y,
     # the track's common error entering as -t . eps
     mean = np.array([op.map_bias_lane_prior_m, 0.0, 0.0, 0.0])
-    A_lat, d_lat, nrm_lat, w_lat = A, d, nrm, weights
     fit = _fit_with_shape(A, d, nrm, weights, P0, mean, xy, track_cov, route, end_s, params)
+    far = None
+    if op.map_bias_far_turned and (fit is None or abs(fit[0][0]) > op.max_offset_m):
+        far = _far_turned_fit(xy, route, end_s, track_var, track_cov, P0, mean, params)
+        fit = fit if far is None else far
     if fit is None:
         return prior
     u, C, G, (A, d, nrm, weights) = fit
@@ -538,13 +635,21 @@ def learn_map_bias(
             turn_var=turn_var,
             refused=refused,
         )
-    if rotated and op.map_bias_turn_prior:
+    if rotated and op.map_bias_turn_prior and far is None:
         # decided with the map's shift held at its local prior (the tests for another road
         # and for significance as without the switch), the turned bias's values from the fit
         # whose shift prior includes the rotation's share (:func:`_turn_spread`)
         P0[1:3, 1:3] += P0[3, 3] * _turn_spread(route, end_s, end, params)
-        spread = _fit_with_shape(
-            A_lat, d_lat, nrm_lat, w_lat, P0, mean, xy, track_cov, route, end_s, params
+        spread = _relinearised_fit(
+            xy,
+            route,
+            end_s,
+            track_var,
+            track_cov,
+            P0,
+            mean,
+            params,
+            passes=1,
         )
         if spread is not None:
             u, C, G, _ = spread

@@ -437,6 +437,22 @@ class OffsetParams:
         "with that rotation and its sigma (a map drawn turned about a point far into a long "
         "tunnel is metres off at the portal)",
     )
+    map_bias_far_turned: bool = param(
+        True,
+        "an approach that fits the route only with a shift beyond the map's local prior "
+        "(offset.map_bias_cross_sigma_m) is fitted again with the shift's prior widened by the "
+        "rotation's share, as offset.map_bias_turn_prior does, and the bias is applied when its "
+        "rotation is significant and passes the test for another road (a map drawn turned about "
+        "a point kilometres into a long tunnel is tens of metres off at the portal)",
+    )
+    map_bias_far_turned_passes: int = param(
+        3,
+        "Gauss-Newton passes of offset.map_bias_far_turned's fit, each against the route moved "
+        "back by the fit so far",
+        lo=1,
+        hi=10,
+        step=1,
+    )
     map_bias_turn_prior: bool = param(
         True,
         "a map bias applied with its rotation takes its values from a fit whose prior on the "
