@@ -336,13 +336,15 @@ def _fit_with_shape(
     route: Route,
     end_s: float,
     params: Params,
+    *,
+    max_residual_m: float | None = None,
 ) -> tuple[F64, F64, F64, tuple[F64, F64, F64, F64]] | None:
     """The bias fit in two passes: the cross-track rows (``A``, ``d``, ``nrm``, ``weights``;
     unknowns lane, shift E, N and, with a fourth column, a rotation about the track's end)
     solved once, then again with the shape's along-track row against ``route`` moved back by
     that first solve (:func:`_with_shape_row`). Returns (u, C, G) of the second solve and the
-    rows it used, or None when the cross-track residual exceeds
-    ``offset.map_bias_max_residual_m`` (a track that does not follow the route)."""
+    rows it used, or None when the cross-track residual exceeds ``max_residual_m`` (by default
+    ``offset.map_bias_max_residual_m``: a track that does not follow the route)."""
     n_lateral = len(d)
     first = _solve(A, d, weights, P0, nrm, mean)[0]
     rotation = float(first[3]) if len(first) > 3 else 0.0
@@ -351,7 +353,9 @@ def _fit_with_shape(
     A, d, nrm, weights = rows
     u, C, G = _solve(A, d, weights, P0, nrm, mean)
     residual = float(np.sqrt(np.mean((d[:n_lateral] - A[:n_lateral] @ u) ** 2)))
-    if not np.isfinite(residual) or residual > params.offset.map_bias_max_residual_m:
+    if max_residual_m is None:
+        max_residual_m = params.offset.map_bias_max_residual_m
+    if not np.isfinite(residual) or residual > max_residual_m:
         return None
     return u, C, G, rows
 
@@ -457,10 +461,11 @@ def _relinearised_fit(
     ``passes`` times, each against the route moved back by the fit so far (Gauss-Newton: the
     increment's prior is the prior less what is moved back, and the bias field being linear
     in shift and rotation about the end, the increments add). Distances to a route tens of
-    metres off are not linear in the shift where the route bends."""
+    metres off are not linear in the shift where the route bends, so only the last pass's
+    residual tells whether the track follows the route."""
     moved_by = np.zeros(4)
     fit = None
-    for _ in range(passes):
+    for k in range(passes):
         moved = route
         s_moved = end_s
         if fit is not None:
@@ -469,7 +474,17 @@ def _relinearised_fit(
         rows = _turned_rows(xy, moved, s_moved, track_var, track_cov, params)
         if rows is None:
             return None
-        step = _fit_with_shape(*rows, P0, mean - moved_by, xy, track_cov, moved, s_moved, params)
+        step = _fit_with_shape(
+            *rows,
+            P0,
+            mean - moved_by,
+            xy,
+            track_cov,
+            moved,
+            s_moved,
+            params,
+            max_residual_m=None if k == passes - 1 else math.inf,
+        )
         if step is None:
             return None
         u, C, G, used = step
