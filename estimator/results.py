@@ -173,6 +173,21 @@ class MapBiasUse:
     refused: MapBiasRefusal | None = None
     """why it was not applied when that was not its significance: taken for another road, the
     matcher's gates judging the route as it is (None when applied or not significant)"""
+    pivot: F64 = field(default_factory=lambda: np.full(2, np.nan))
+    """(2,) E, N, m: where the bias was learned (the approach's end), which ``offset`` is at
+    and ``rotation_rad`` turns about"""
+
+    def at(self, xy: F64) -> F64:
+        """The bias at points ``xy`` ((2,) or (N, 2)): ``offset`` turned by ``rotation_rad``
+        about ``pivot``. A map drawn turned about a point far into a long tunnel is off by
+        tens of metres more at the vehicle than at the portal, or by nothing."""
+        p = np.asarray(xy, np.float64)
+        if self.rotation_rad == 0.0 or not np.all(np.isfinite(self.pivot)):
+            return np.broadcast_to(self.offset, p.shape).astype(np.float64)
+        d = p - self.pivot
+        turned = np.stack([-d[..., 1], d[..., 0]], axis=-1)
+        out: F64 = self.offset + self.rotation_rad * turned
+        return out
 
 
 @dataclass(frozen=True)
@@ -293,9 +308,12 @@ class MatchRecord:
             n = self.fit.normal
             t = np.array([n[1], -n[0]])
             c = self.map_bias.cov
-            out["map_bias_along_m"] = float(t @ self.map_bias.offset)
+            here = self.map_bias.offset
+            if np.all(np.isfinite(self.p_ref)):
+                here = self.map_bias.at(self.p_ref)
+            out["map_bias_along_m"] = float(t @ here)
             out["map_bias_along_sigma_m"] = float(np.sqrt(t @ c @ t))
-            out["map_bias_cross_m"] = float(n @ self.map_bias.offset)
+            out["map_bias_cross_m"] = float(n @ here)
             out["map_bias_cross_sigma_m"] = float(np.sqrt(n @ c @ n))
             if np.isfinite(self.map_bias.chi2):
                 out["map_bias_chi2"] = self.map_bias.chi2

@@ -399,8 +399,8 @@ class MatchLayer(Layer):
         seg = np.asarray(m.route_segment, np.float64).reshape(-1, 2)
         self._lines("segment", polyline_segments(seg, 0.02), SEGMENT, 7.0)
         map_seg = np.zeros((0, 2))
-        if m.map_bias is not None and np.all(np.isfinite(m.map_bias.offset)):
-            map_seg = seg + np.asarray(m.map_bias.offset, np.float64).reshape(1, 2)
+        if m.map_bias is not None and np.all(np.isfinite(m.map_bias.offset)) and len(seg):
+            map_seg = seg + m.map_bias.at(seg)
         self._lines("map_segment", polyline_segments(map_seg, 0.01), MAP_SEGMENT, 3.0)
         self._lines("window", polyline_segments(win, 0.3), DR_WINDOW, 3.0)
         aligned = np.zeros((0, 2))

@@ -13,6 +13,7 @@ so the UI and the estimator agree on what "on the route" means.
 
 from __future__ import annotations
 
+import math
 from dataclasses import dataclass
 from typing import Any, Literal
 
@@ -84,6 +85,25 @@ def _nearest(route: Route, xy: F64) -> tuple[F64, F64]:
     return s, route.point_at(s)
 
 
+def _moved_distance(m: MatchRecord, t: F64, xy: F64, t0: float) -> float:
+    """The distance of the vehicle (``xy`` at ``t`` s after the start) at attempt ``m`` from
+    the route segment it was matched to, when an applied map bias moved that segment; NaN
+    otherwise."""
+    seg = np.asarray(m.route_segment, np.float64)
+    if m.map_bias is None or not m.map_bias.applied or len(seg) < 2 or not len(t):
+        return float("nan")
+    at = m.t - t0
+    if at < t[0] or at > t[-1]:
+        return float("nan")
+    p = np.array([np.interp(at, t, xy[:, 0]), np.interp(at, t, xy[:, 1])])
+    a, b = seg[:-1], seg[1:]
+    ab = b - a
+    length2 = np.maximum(np.einsum("ij,ij->i", ab, ab), 1e-12)
+    u = np.clip(np.einsum("ij,ij->i", p - a, ab) / length2, 0.0, 1.0)
+    foot = a + u[:, None] * ab
+    return float(np.min(np.hypot(*(p - foot).T)))
+
+
 def _spans(t: F64, mask: NDArray[np.bool_]) -> tuple[tuple[float, float], ...]:
     edges = np.flatnonzero(np.diff(np.r_[0, mask.astype(np.int8), 0]))
     return tuple(
@@ -108,6 +128,10 @@ class OffRoute:
     """off-route intervals, s after start"""
     refused: tuple[str | None, ...]
     """per match attempt: the off-route gate that refused it, or None"""
+    moved_distance_m: tuple[float, ...] = ()
+    """per match attempt: the vehicle's distance from the route segment it was matched to,
+    which an applied map bias (``extensions.map_bias``) moved back from where the map draws
+    it; NaN for an attempt without an applied bias"""
 
     @classmethod
     def build(cls, scene: Any, route: Route, params: Params) -> OffRoute:
@@ -131,6 +155,9 @@ class OffRoute:
             off=off,
             spans=_spans(t, off),
             refused=tuple(refused_off_route(m) for m in scene.matches),
+            moved_distance_m=tuple(
+                _moved_distance(m, t[ok], xy[ok], scene.t0) for m in scene.matches
+            ),
         )
 
     # -- lookups (per frame) --------------------------------------------------------------
@@ -179,10 +206,27 @@ class OffRoute:
 
     def panel_text(self, t_rel: float, match_index: int | None) -> str:
         """Lines heading the match panel: the off-route state now, and why the attempt shown
-        was refused when it was refused as off-route."""
+        was refused when it was refused as off-route. Where the attempt shown was matched to
+        the route moved back by an applied map bias, the vehicle's distance from the moved
+        route says whether a match was to be expected, not its distance from the map's."""
         lines = []
         off, d = self.at(t_rel)
-        if off:
+        moved = float("nan")
+        if match_index is not None and 0 <= match_index < len(self.moved_distance_m):
+            moved = self.moved_distance_m[match_index]
+        if off and math.isfinite(moved):
+            expected = (
+                "a match onto it is expected"
+                if moved <= self.threshold_m
+                else "no match onto it is expected either"
+            )
+            lines.append(
+                f"**OFF-ROUTE as the map draws it**: the vehicle ({self.source}) is {d:.1f} m "
+                f"from the route as drawn and {moved:.1f} m from it moved back by the map "
+                f"bias this attempt used (limit {self.threshold_m:g} m, offset.max_offset_m); "
+                f"{expected}."
+            )
+        elif off:
             lines.append(
                 f"**OFF-ROUTE**: the vehicle ({self.source}) is {d:.1f} m from the route "
                 f"(limit {self.threshold_m:g} m, offset.max_offset_m); no match onto the "

@@ -395,10 +395,10 @@ def map_bias_notes(run: Run) -> list[str]:
         along, across = float(t @ learned), float(n @ learned)
         measured = (
             f"{abs(along):.1f} m {'ahead' if along >= 0 else 'behind'} and {abs(across):.1f} m "
-            f"{'left' if across >= 0 else 'right'} of"
+            f"{'left' if across >= 0 else 'right'} of the road driven at the approach's end"
         )
         if bias.rotation_rad:
-            measured += f" (turned {math.degrees(bias.rotation_rad):+.2f} deg about)"
+            measured += f", turned {math.degrees(bias.rotation_rad):+.2f} deg about there"
         if bias.applied:
             verdict = (
                 f"applied (sigma {math.sqrt(float(t @ bias.cov @ t)):.1f} m along, "
@@ -409,8 +409,8 @@ def map_bias_notes(run: Run) -> list[str]:
         else:
             verdict = "not significant: the route taken as right"
         notes.append(
-            f"map bias for the outage at {a - run.t0:.1f} s: the route is drawn {measured} "
-            f"the road driven; {verdict}"
+            f"map bias for the outage at {a - run.t0:.1f} s: the route is drawn {measured}; "
+            f"{verdict}"
         )
     return notes
 

@@ -755,6 +755,7 @@ class Driver:
                 rotation_sigma_rad=bias.rotation_sigma,
                 applied=bias.significant,
                 refused=bias.refused,
+                pivot=np.asarray(bias.pivot, np.float64).copy(),
             )
             return dataclasses.replace(rec, map_bias=used)
 

@@ -72,17 +72,11 @@ def test_toggling_a_layer_hides_its_nodes(server):
     layers.remove()
 
 
-def test_a_match_with_a_map_bias_draws_the_segment_where_the_map_has_it(server):
-    """With ``extensions.map_bias`` the window is matched to the route moved back by the
-    learned bias; the map's own segment is drawn beside it, ``offset`` away, and hidden for a
-    match without a bias."""
+def _map_bias_layers(server, bias, root):
+    """The layers of a run whose attempt shown at ``T0 + 45`` was matched with ``bias``."""
     import dataclasses
 
-    from estimator.results import MapBiasUse
-
     run = make_run()
-    offset = np.array([6.0, -2.5])
-    bias = MapBiasUse(offset=offset, cov=np.eye(2), along_observed=True)
     k = next(i for i, m in enumerate(run.matches) if m.index == 1)  # on screen at T0 + 45
     matches = tuple(
         dataclasses.replace(m, map_bias=bias) if i == k else m for i, m in enumerate(run.matches)
@@ -93,13 +87,46 @@ def test_a_match_with_a_map_bias_draws_the_segment_where_the_map_has_it(server):
         route=make_route(),
         log=None,
     )
-    layers = SceneLayers(server.scene, root="/test3")
+    layers = SceneLayers(server.scene, root=root)
     layers.set_data(data)
-    match = layers.layers["match"]
     layers.draw(T0 + 45)
+    return layers
+
+
+def test_a_match_with_a_map_bias_draws_the_segment_where_the_map_has_it(server):
+    """With ``extensions.map_bias`` the window is matched to the route moved back by the
+    learned bias; the map's own segment is drawn beside it, ``offset`` away, and hidden for a
+    match without a bias."""
+    from estimator.results import MapBiasUse
+
+    offset = np.array([6.0, -2.5])
+    bias = MapBiasUse(offset=offset, cov=np.eye(2), along_observed=True)
+    layers = _map_bias_layers(server, bias, "/test3")
+    match = layers.layers["match"]
     matched, on_map = match._handles["segment"].points, match._handles["map_segment"].points
     assert match._handles["map_segment"].visible and on_map.shape == matched.shape
     assert np.allclose(on_map[..., :2] - matched[..., :2], offset, atol=1e-4)
     layers.draw(T0 + 50)
     assert not match._handles["map_segment"].visible
+    layers.remove()
+
+
+def test_a_turned_map_bias_draws_the_segment_turned_about_where_it_was_learned(server):
+    """A map turned about a point far into a long tunnel lies tens of metres more off at the
+    vehicle than at the portal where the bias was learned: the map's segment is drawn where
+    the turned bias puts it at the vehicle, not ``offset`` (the bias at the pivot) away."""
+    from estimator.results import MapBiasUse
+
+    offset, pivot, rotation = np.array([6.0, -2.5]), np.array([-3000.0, 400.0]), 0.03
+    bias = MapBiasUse(
+        offset=offset, cov=np.eye(2), along_observed=True, rotation_rad=rotation, pivot=pivot
+    )
+    layers = _map_bias_layers(server, bias, "/test4")
+    match = layers.layers["match"]
+    matched = match._handles["segment"].points[..., :2]
+    on_map = match._handles["map_segment"].points[..., :2]
+    d = matched - pivot
+    expected = offset + rotation * np.stack([-d[..., 1], d[..., 0]], axis=-1)
+    assert np.allclose(on_map - matched, expected, atol=1e-3)
+    assert np.min(np.hypot(*(on_map - matched - offset).reshape(-1, 2).T)) > 50.0
     layers.remove()

@@ -206,3 +206,42 @@ def test_a_vehicle_starting_on_the_extension_side_is_picked_up_where_it_drives()
     off = OffRoute.build(_Scene(track, track), route, Params())
     assert off.off[:30].all()  # 400 m away at first
     assert not off.off[60:].any()
+
+
+def test_a_route_moved_back_by_an_applied_map_bias_is_what_off_route_is_judged_against():
+    """A map drawn 60 m to the side of the road (turned about a point far into a tunnel, say)
+    puts the vehicle off the route as drawn, but an attempt matched to the route moved back by
+    the applied map bias was to be expected: the panel says both distances and does not claim
+    that no match was expected."""
+    import dataclasses
+    from types import SimpleNamespace
+
+    from fake_runs import T0 as RUN_T0
+    from fake_runs import make_run
+
+    from estimator.results import MapBiasUse
+
+    run = make_run(n_matches=2, rejected=())
+    road = run.epochs.position[:, :2]
+    drawn = Route(road[::20] + np.array([0.0, 60.0]))
+    bias = MapBiasUse(
+        offset=np.array([0.0, 60.0]), cov=np.eye(2), along_observed=True, applied=True
+    )
+    first, second = run.matches
+    segment = first.route_segment + np.array([0.0, 1.0])
+    moved = dataclasses.replace(first, map_bias=bias, route_segment=segment)
+    scene = SimpleNamespace(
+        truth=SimpleNamespace(t=run.epochs.t, xy=road),
+        proposed=None,
+        t0=RUN_T0,
+        matches=(moved, second),
+    )
+    off = OffRoute.build(scene, drawn, Params())
+    at = moved.t - RUN_T0
+    assert off.at(at)[0] and off.at(at)[1] == pytest.approx(60.0, abs=1.0)
+    assert off.moved_distance_m[0] == pytest.approx(1.0, abs=0.05)
+    assert np.isnan(off.moved_distance_m[1])
+    head = off.panel_text(at, 0)
+    assert "OFF-ROUTE as the map draws it" in head and "1.0 m from it moved back" in head
+    assert "a match onto it is expected" in head and "no match" not in head
+    assert "no match onto the route is expected here" in off.panel_text(at, 1)

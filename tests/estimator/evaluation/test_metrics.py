@@ -351,7 +351,8 @@ def test_a_map_bias_the_run_applied_is_said_and_a_right_route_is_taken_as_right(
         ]
     )
     assert note.startswith("map bias for the outage at 108.4 s: the route is drawn ")
-    assert "ahead" in note and "left of the road driven; applied (sigma" in note
+    assert "ahead" in note
+    assert "left of the road driven at the approach's end; applied (sigma" in note
     ahead = float(note.split("drawn ")[1].split(" m ahead")[0])
     left = float(note.split("ahead and ")[1].split(" m left")[0])
     assert np.hypot(ahead, left) == pytest.approx(np.hypot(10.0, 3.5), abs=3.0)
@@ -366,7 +367,8 @@ def test_a_map_bias_the_run_applied_is_said_and_a_right_route_is_taken_as_right(
     (refused,) = map_bias_notes(aside_run)
     assert refused.startswith("map bias for the outage at 108.4 s: the route is drawn ")
     assert refused.endswith(
-        "left of the road driven; not applied: too large for a map's error (another road?)"
+        "left of the road driven at the approach's end; not applied: too large for a map's "
+        "error (another road?)"
     )
     left = float(
         refused.split("ahead and " if "ahead" in refused else "behind and ")[1].split(" m left")[0]
