@@ -451,7 +451,8 @@ class OffsetParams:
         "Gauss-Markov process of noise.gnss_wander_tau_s, correlated along the track) rather "
         "than one error common to the whole approach: the far part of a long approach, whose "
         "wander the outage start shares only in part, weighs less and passes less of the "
-        "position error on to the lane and map-bias errors the outage clones",
+        "position error on to the lane and map-bias errors the outage clones (the fit learned "
+        "afresh before an outage; a carried bias's refinement keeps one common error)",
     )
     map_bias_far_turned_passes: int = param(
         3,
