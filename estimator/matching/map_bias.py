@@ -36,14 +36,20 @@ lane-offset and map-bias errors as considered states cloned through ``G`` from i
 error at the outage start (:func:`estimator.filter.updates.clone_route_errors`): the
 pseudo-positions then hold the estimate to the road without claiming to know it better than
 GNSS did. The rest (map shape, lane keeping) is noise of ``pseudo.shape_noise_m`` per
-``window.length_m`` of track, independent of the state.
+``window.length_m`` of track, independent of the state. The receiver's wander is common only
+over its correlation time (a minute, ``noise.gnss_wander_tau_s``): on an approach longer than
+that, ``offset.map_bias_wander_rows`` takes a point's error as the share of the end's error
+the wander keeps over the time between them plus the rest, correlated along the track
+(:func:`_wander_rows`).
 
 The bias is used only when a chi-square test of ``b`` (or of ``a``) against zero, with its full
 covariance, exceeds ``offset.map_bias_min_sigmas`` squared: a right map then keeps the lane
 offset learned near the portal and no bias, and the filter only carries
 ``offset.map_bias_null_sigma_m`` of map error. Otherwise the route is moved back by the bias
 for every match of the outage and ``l`` is its lane offset; the rotation's remaining
-uncertainty grows the map-bias error with the distance from ``x_e``. A bias further from zero
+uncertainty grows the map-bias error with the distance from ``x_e``; a rotation fitted but
+not applied is considered in the outage as what the fit shows beyond its noise
+(:func:`_unapplied_turn_var`). A bias further from zero
 than ``offset.map_bias_max_prior_sigmas`` of its prior all along the road ahead (a map drawn
 turned is right somewhere, perhaps in the tunnel, and off most far from there) is not a map's
 error but another road (a parallel carriageway): nothing is learned, and the matcher's gates
@@ -232,9 +238,13 @@ class _LateralRows:
     normal: F64
     """(K, 2) the route's normals where they project"""
     weights: F64
-    """(K,) 1 / variance of each distance"""
+    """(K,) 1 / variance of each distance, or (K, K) the inverse of their covariance where
+    the GNSS wander is correlated along the track (``offset.map_bias_wander_rows``)"""
     span: float
     """distance along the thinned track, m"""
+    common: F64
+    """(K,) how much of the track's common error (the estimate's at the end) each distance
+    holds: 1, or the wander's correlation with the end (``offset.map_bias_wander_rows``)"""
 
 
 def _lateral_rows(
@@ -244,11 +254,14 @@ def _lateral_rows(
     track_var: F64 | None,
     track_cov: F64,
     params: Params,
+    track_t: F64 | None = None,
 ) -> _LateralRows | None:
     """The approach ``xy`` (ending at arc length ``end_s``) against ``route``; None with fewer
     than 5 points on it. The map's shape and the lane keeping err together over a window's
     length, so the distances count as many independent ones as windows fit in the span;
-    ``track_var`` adds each point's own variance beyond the track's common error."""
+    ``track_var`` adds each point's own variance beyond the track's common error. With
+    ``track_t`` (the points' times) and ``offset.map_bias_wander_rows`` the track's error is
+    the filter's GNSS wander (:func:`_wander_rows`), not one error common to the whole track."""
     keep = _thin(xy, params.window.spacing_m)
     pts = xy[keep]
     step = np.hypot(*np.diff(pts, axis=0).T)
@@ -264,13 +277,39 @@ def _lateral_rows(
     if track_var is not None:
         v = np.asarray(track_var, np.float64)[keep][inside]
         var += np.maximum(v - 0.5 * float(np.trace(track_cov)), 0.0)
+    normal = route.normal_at(proj.s[inside])
+    weights: F64 = 1.0 / var
+    common = np.ones(len(d))
+    if track_t is not None and params.offset.map_bias_wander_rows:
+        t = np.asarray(track_t, np.float64)[keep][inside]
+        weights, common = _wander_rows(var, normal, t, track_cov, params)
     return _LateralRows(
         points=pts[inside],
         d=d,
-        normal=route.normal_at(proj.s[inside]),
-        weights=1.0 / var,
+        normal=normal,
+        weights=weights,
         span=span,
+        common=common,
     )
+
+
+def _wander_rows(var: F64, normal: F64, t: F64, track_cov: F64, params: Params) -> tuple[F64, F64]:
+    """The weight matrix of cross-track distances (independent variances ``var``, route
+    normals ``normal``, times ``t``) whose estimate errs by the GNSS wander, a Gauss-Markov
+    process of correlation time ``noise.gnss_wander_tau_s`` and covariance ``track_cov`` (the
+    estimate's at the end), and the share ``rho`` of the end's error each distance holds.
+    Given the end's error (carried through the fit's gain), a point ``dt`` before it errs by
+    ``rho = exp(-dt / tau)`` of it plus a part of covariance ``(exp(-|t_i - t_j| / tau) -
+    rho_i rho_j) track_cov``: zero at the end, growing back along the track. Counted as one
+    common error, the wander of a minute's approach, a drift of the cross-track error with
+    the distance from the end, is taken for a rotation of the map with a sigma too small."""
+    tau = params.noise.gnss_wander_tau_s
+    rho = np.exp(-(t[-1] - t) / tau)
+    corr = np.exp(-np.abs(t[:, None] - t[None, :]) / tau) - np.outer(rho, rho)
+    cov = corr * np.einsum("ia,ab,jb->ij", normal, track_cov, normal)
+    cov[np.diag_indices_from(cov)] += var
+    weights: F64 = np.linalg.inv(cov)
+    return weights, rho
 
 
 def _thin(xy: F64, spacing: float) -> NDArray[np.intp]:
@@ -309,11 +348,17 @@ def _with_shape_row(
     y, tangent, along_var = along
     row = np.zeros(A.shape[1])
     row[1:3] = tangent
+    if weights.ndim == 1:
+        weighted: F64 = np.append(weights, 1.0 / along_var)
+    else:
+        weighted = np.zeros((len(d) + 1, len(d) + 1))
+        weighted[:-1, :-1] = weights
+        weighted[-1, -1] = 1.0 / along_var
     return (
         np.vstack([A, row]),
         np.append(d, y + float(tangent @ first[1:3])),
         np.vstack([nrm, -tangent]),
-        np.append(weights, 1.0 / along_var),
+        weighted,
     )
 
 
@@ -384,9 +429,11 @@ def _solve(A: F64, d: F64, weights: F64, P0: F64, nrm: F64, prior: F64) -> tuple
     ``P0``, its covariance with the independent noise, and the gain ``G = K N`` of the track's
     common error: ``d`` holds ``n_i . (estimate - truth)``, so u's error is ``K N eps``; the
     filter's states are the negative of u's error and its position error is truth -
-    estimate, hence ``G``."""
-    C = np.linalg.inv(A.T @ (weights[:, None] * A) + np.linalg.inv(P0))
-    K = C @ (A * weights[:, None]).T
+    estimate, hence ``G``. ``weights``: (K,) the rows' inverse variances, or (K, K) the
+    inverse of their covariance."""
+    WA = weights[:, None] * A if weights.ndim == 1 else weights @ A
+    C = np.linalg.inv(A.T @ WA + np.linalg.inv(P0))
+    K = C @ WA.T
     return prior + K @ (d - A @ prior), C, K @ nrm
 
 
@@ -430,19 +477,26 @@ def _least_bias_ahead(
 
 
 def _turned_rows(
-    xy: F64, route: Route, end_s: float, track_var: F64 | None, track_cov: F64, params: Params
+    xy: F64,
+    route: Route,
+    end_s: float,
+    track_var: F64 | None,
+    track_cov: F64,
+    params: Params,
+    track_t: F64 | None = None,
 ) -> tuple[F64, F64, F64, F64] | None:
     """The cross-track rows of the fit (``A``, ``d``, ``nrm``, ``weights``; unknowns lane,
     shift E, N at the approach's end and a rotation about it) of the approach ``xy`` against
-    ``route``; None where it is too short (:func:`_lateral_rows`)."""
-    rows = _lateral_rows(xy, route, end_s, track_var, track_cov, params)
+    ``route``; None where it is too short (:func:`_lateral_rows`). ``nrm`` holds the share of
+    the track's common error each row carries."""
+    rows = _lateral_rows(xy, route, end_s, track_var, track_cov, params, track_t)
     if rows is None or rows.span < params.window.length_m:
         return None
     rel = rows.points - xy[-1]
     turned = np.column_stack([-rel[:, 1], rel[:, 0]])  # J (x - x_e)
     nrm = rows.normal
     A = np.column_stack([np.ones(len(rows.d)), -nrm, -np.sum(nrm * turned, axis=1)])
-    return A, rows.d, nrm, rows.weights
+    return A, rows.d, nrm * rows.common[:, None], rows.weights
 
 
 def _relinearised_fit(
@@ -456,6 +510,7 @@ def _relinearised_fit(
     params: Params,
     *,
     passes: int,
+    track_t: F64 | None = None,
 ) -> tuple[F64, F64, F64, tuple[F64, F64, F64, F64]] | None:
     """:func:`_fit_with_shape` on the approach's rows (:func:`_turned_rows`) repeated
     ``passes`` times, each against the route moved back by the fit so far (Gauss-Newton: the
@@ -471,7 +526,7 @@ def _relinearised_fit(
         if fit is not None:
             moved = Route(xy_moved_back(route.xy, moved_by[1:3], float(moved_by[3]), xy[-1]))
             s_moved = float(moved.project(xy[-1:], end_s, params.window.route_search_m).s[0])
-        rows = _turned_rows(xy, moved, s_moved, track_var, track_cov, params)
+        rows = _turned_rows(xy, moved, s_moved, track_var, track_cov, params, track_t)
         if rows is None:
             return None
         step = _fit_with_shape(
@@ -502,6 +557,7 @@ def _far_turned_fit(
     P0: F64,
     mean: F64,
     params: Params,
+    track_t: F64 | None = None,
 ) -> tuple[F64, F64, F64, tuple[F64, F64, F64, F64]] | None:
     """The fit with the shift's prior widened by the rotation's share (:func:`_turn_spread`)
     for an approach the fit held at the map's local prior cannot follow
@@ -523,6 +579,7 @@ def _far_turned_fit(
         mean,
         params,
         passes=op.map_bias_far_turned_passes,
+        track_t=track_t,
     )
     if fit is None:
         return None
@@ -537,6 +594,21 @@ def _far_turned_fit(
     return fit
 
 
+def _unapplied_turn_var(rotation: float, var: float, params: Params) -> float:
+    """The variance of the map's rotation error considered for a rotation fitted (``rotation``,
+    variance ``var``) but not applied. By default the method of moments, its square less its
+    variance: from one fit that is positive on a third of right maps (any draw beyond one
+    sigma), and a long approach's fit with a sigma of hundredths of a degree makes such a
+    draw a rotation that grows the pseudo-positions' error kilometres into a tunnel. With
+    ``offset.map_turn_lower_sigmas`` ``k`` it is the square of the least rotation the fit
+    shows at ``k`` sigmas, ``(|rotation| - k sigma)^2`` where positive: a draw within ``k``
+    sigmas claims nothing, one at the significance test nearly all it shows."""
+    k = params.offset.map_turn_lower_sigmas
+    if k <= 0.0:
+        return max(rotation**2 - var, 0.0)
+    return max(abs(rotation) - k * math.sqrt(var), 0.0) ** 2
+
+
 def learn_map_bias(
     track_xy: F64,
     track_cov: F64,
@@ -546,11 +618,13 @@ def learn_map_bias(
     lane_offset: float,
     params: Params,
     track_var: F64 | None = None,
+    track_t: F64 | None = None,
 ) -> MapBias:
     """The map bias from ``track_xy`` (N, 2), the GNSS-good estimate over the last
     ``offset.map_bias_track_m`` in time order, ending at the vehicle; ``track_cov`` its E/N
     covariance at the end; ``track_var`` (N,) the estimate's horizontal variance per point
-    (a point less certain than the end weighs less); ``s_guess`` the route arc length of the
+    (a point less certain than the end weighs less); ``track_t`` (N,) the points' times (for
+    ``offset.map_bias_wander_rows``); ``s_guess`` the route arc length of the
     end; ``lane_offset`` the lane offset learned near the end (kept when the bias is not
     significant). A track that does not follow the route (residual above
     ``offset.map_bias_max_residual_m``) learns nothing."""
@@ -561,7 +635,7 @@ def learn_map_bias(
     prior = prior_bias(params, lane=lane_offset, normal=normal_end)
     if len(xy) < 2:
         return prior
-    rows = _turned_rows(xy, route, end_s, track_var, track_cov, params)
+    rows = _turned_rows(xy, route, end_s, track_var, track_cov, params, track_t)
     if rows is None:
         return prior
     end = xy[-1]
@@ -577,7 +651,7 @@ def learn_map_bias(
     fit = _fit_with_shape(A, d, nrm, weights, P0, mean, xy, track_cov, route, end_s, params)
     far = None
     if op.map_bias_far_turned and (fit is None or abs(fit[0][0]) > op.max_offset_m):
-        far = _far_turned_fit(xy, route, end_s, track_var, track_cov, P0, mean, params)
+        far = _far_turned_fit(xy, route, end_s, track_var, track_cov, P0, mean, params, track_t)
         fit = fit if far is None else far
     if fit is None:
         return prior
@@ -592,7 +666,7 @@ def learn_map_bias(
         second_moment = float(u[3] ** 2 + total[3, 3])
         # a rotation not applied leaves the map turned by what the fit saw, less what its own
         # noise explains (a right map within its noise gains nothing)
-        turn_var = max(float(u[3] ** 2 - total[3, 3]), 0.0)
+        turn_var = _unapplied_turn_var(float(u[3]), float(total[3, 3]), params)
         honest_turn_var = turn_var
         if params.extensions.map_turn_estimate and op.map_turn_honest_prior:
             # with the bias applied the outage's matches estimate the rotation error, which can
@@ -665,6 +739,7 @@ def learn_map_bias(
             mean,
             params,
             passes=1,
+            track_t=track_t,
         )
         if spread is not None:
             u, C, G, _ = spread

@@ -445,6 +445,15 @@ class OffsetParams:
         "rotation is significant and passes the test for another road (a map drawn turned about "
         "a point kilometres into a long tunnel is tens of metres off at the portal)",
     )
+    map_bias_wander_rows: bool = param(
+        False,
+        "the map-bias fit takes the approach's error as the filter's GNSS wander (a "
+        "Gauss-Markov process of noise.gnss_wander_tau_s, correlated along the track) rather "
+        "than one error common to the whole approach: the far part of a long approach, whose "
+        "wander the outage start shares only in part, weighs less and passes less of the "
+        "position error on to the lane and map-bias errors the outage clones (the fit learned "
+        "afresh before an outage; a carried bias's refinement keeps one common error)",
+    )
     map_bias_far_turned_passes: int = param(
         3,
         "Gauss-Newton passes of offset.map_bias_far_turned's fit, each against the route moved "
@@ -471,6 +480,18 @@ class OffsetParams:
         "less its variance, often zero): the matches cannot tell the map's rotation from the "
         "dead-reckoned heading's drift, so on a right map they then turn the map instead of "
         "the heading",
+    )
+    map_turn_lower_sigmas: float = param(
+        0.0,
+        "a map rotation fitted on the approach but not applied is considered in the outage "
+        "as the least rotation the fit shows at this many of its sigmas, (|a| - k sigma)^2, "
+        "instead of the method of moments (a^2 less its variance, positive for any draw beyond "
+        "one sigma on a right map) (0: the method of moments; measured with "
+        "offset.map_bias_track_m 1600 only: at 800 m it loses turned maps)",
+        unit="sigma",
+        lo=0.0,
+        hi=3.0,
+        step=0.1,
     )
     map_turn_min_heading_ratio: float = param(
         1.2,

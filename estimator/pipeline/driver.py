@@ -642,6 +642,7 @@ class Driver:
             lane_offset=self.track.lane,
             params=self.p,
             track_var=_track_var(track),
+            track_t=track[:, O_T],
         )
 
     def _bias_track(self, rows: F64, last: NDArray[np.intp]) -> F64 | None:
