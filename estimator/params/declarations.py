@@ -300,9 +300,11 @@ class OffsetParams:
         8.0, "offsets larger than this are not learned (off-route)", unit="m", lo=0, hi=50, step=0.5
     )
     map_bias_track_m: float = param(
-        800.0,
+        1600.0,
         "GNSS-good driving before an outage registered to the route to learn the map's bias "
-        "(extensions.map_bias)",
+        "(extensions.map_bias; with offset.map_turn_lower_sigmas, since a long approach's "
+        "rotation sigma is small enough for the method of moments to make a rotation of a "
+        "one-sigma draw)",
         unit="m",
         lo=50,
         hi=3000,
@@ -482,12 +484,12 @@ class OffsetParams:
         "the heading",
     )
     map_turn_lower_sigmas: float = param(
-        0.0,
+        2.0,
         "a map rotation fitted on the approach but not applied is considered in the outage "
         "as the least rotation the fit shows at this many of its sigmas, (|a| - k sigma)^2, "
         "instead of the method of moments (a^2 less its variance, positive for any draw beyond "
-        "one sigma on a right map) (0: the method of moments; measured with "
-        "offset.map_bias_track_m 1600 only: at 800 m it loses turned maps)",
+        "one sigma on a right map) (0: the method of moments; goes with "
+        "offset.map_bias_track_m 1600: at 800 m it loses turned maps)",
         unit="sigma",
         lo=0.0,
         hi=3.0,

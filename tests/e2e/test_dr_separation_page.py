@@ -14,10 +14,10 @@ from pathlib import Path
 import pytest
 from _browser import panel_screenshot, served, session_page, wait_until
 
-from estimator.params import Params, with_values
 from estimator.results import Gate
 from inspector.app.match import UNDONE_HERE
 from inspector.cli.main import main
+from tests._undoing import undoing_params
 
 pytestmark = pytest.mark.e2e
 
@@ -37,9 +37,7 @@ def _attempt(page) -> int:
 def test_undone_route_updates_on_the_page(browser, tmp_path):
     assert main(["simulate", "--stress", "5", "--out", str(tmp_path)]) == 0
     bag, route = tmp_path / "stress_5.mcap", tmp_path / "stress_5.route.geojson"
-    # drive 5 trips dr_separation only with the lane untied from the map's shift
-    untied = with_values(Params(), {"extensions.unapplied_bias_lane_tie": False})
-    with served(bag, route, params=untied) as (server, controller, app):
+    with served(bag, route, params=undoing_params()) as (server, controller, app):
         matches = controller.session.proposed.matches
         failed = [(i, _dr_separation(m)) for i, m in enumerate(matches) if _dr_separation(m)]
         undone = [i for i, g in failed if "none taken since" not in g.note]

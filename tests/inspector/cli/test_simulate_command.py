@@ -59,12 +59,10 @@ def test_imu_rate_and_perfect(tmp_path) -> None:
 
 def _truth_rmse(inputs) -> tuple[float, tuple[str, ...], list[bool]]:
     from estimator.evaluation.metrics import method_metrics
-    from estimator.params import Params, with_values
     from estimator.pipeline import run_methods
+    from tests._undoing import undoing_params
 
-    # drive 5 trips dr_separation only with the lane untied from the map's shift
-    untied = with_values(Params(), {"extensions.unapplied_bias_lane_tie": False})
-    run = run_methods(inputs, untied, methods=("proposed",))["proposed"]
+    run = run_methods(inputs, undoing_params(), methods=("proposed",))["proposed"]
     truth = method_metrics(run, inputs.route, inputs.log).truth
     assert truth is not None and truth.rmse_h_err_m is not None
     return truth.rmse_h_err_m, run.warnings, [m.accepted for m in run.matches]
