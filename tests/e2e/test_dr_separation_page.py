@@ -17,7 +17,7 @@ from _browser import panel_screenshot, served, session_page, wait_until
 from estimator.results import Gate
 from inspector.app.match import UNDONE_HERE
 from inspector.cli.main import main
-from tests._undoing import undoing_params
+from tests._session11_fit import undoing_params
 
 pytestmark = pytest.mark.e2e
 

@@ -15,7 +15,7 @@ from estimator.params import Params, with_values
 from estimator.pipeline import run, run_methods
 from estimator.results import Gate, Run
 from estimator.sim.stress import build, drive_spec
-from tests._undoing import SESSION_11_FIT, undoing_params
+from tests._session11_fit import SESSION_11_FIT, undoing_params
 
 
 def _state(position: tuple[float, float], cov: list[float]) -> tuple[np.ndarray, np.ndarray]:

@@ -15,6 +15,7 @@ from estimator.params import Params, with_values
 from estimator.pipeline import run_methods
 from estimator.pipeline.driver import keeps_carried
 from estimator.sim.stress import build, drive_spec
+from tests._session11_fit import SESSION_11_FIT
 from tests.estimator._map_biases import map_bias
 
 GSF = "extensions.gyro_scale_state"
@@ -64,10 +65,13 @@ def test_drive_2_keeps_its_bias_through_the_short_stretches() -> None:
     map as drawn, and the last one refused every match. Kept and refined, the bias is applied
     in every tunnel and the run is no worse than dead reckoning. With ``offset.map_bias_turn_prior``
     on (the default) the first outage ends elsewhere and the stretch's own bias is significant,
-    so both runs apply one in every tunnel (6.38 m); the case is kept with it off."""
-    kept, rmse = _outages({GSF: True, KEEP: True, TURN_PRIOR: False})
+    so both runs apply one in every tunnel (6.38 m); the case is kept with it off, and with
+    session 11's approach (800 m)."""
+    kept, rmse = _outages({**SESSION_11_FIT, GSF: True, KEEP: True, TURN_PRIOR: False})
     assert kept == [True, True, True]
-    replaced, replaced_rmse = _outages({GSF: True, KEEP: False, TURN_PRIOR: False})
+    replaced, replaced_rmse = _outages(
+        {**SESSION_11_FIT, GSF: True, KEEP: False, TURN_PRIOR: False}
+    )
     assert replaced[0] and not replaced[1]
     inputs = build(drive_spec(2)).inputs
     base = run_methods(inputs, with_values(Params(), {GSF: True}), methods=("baseline",))

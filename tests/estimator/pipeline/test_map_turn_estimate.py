@@ -12,6 +12,7 @@ from estimator.evaluation.metrics import outage_errors
 from estimator.params import Params, with_values
 from estimator.pipeline import run_methods
 from estimator.sim.stress import build, drive_spec
+from tests._session11_fit import SESSION_11_FIT
 
 CHI2_2DOF_95 = 5.991
 KEY = "extensions.map_turn_estimate"
@@ -20,7 +21,9 @@ KEY = "extensions.map_turn_estimate"
 def test_a_turned_map_s_rotation_is_learned_in_the_outage() -> None:
     """Corpus drive 14: the multi tunnel on a map turned 0.36 deg (and shifted 6 m), its
     first fix off. The approach's rotation is applied, the outage's matches then had to follow
-    the map turned by what the approach missed of it with their heading alone."""
+    the map turned by what the approach missed of it with their heading alone. With session
+    11's approach (800 m): the 1600 m one misses too little of the rotation for the outage's
+    estimate to matter (1.66 m with it, 1.63 m without)."""
     index = 14
     spec = drive_spec(index)
     inputs = build(spec).inputs
@@ -29,7 +32,9 @@ def test_a_turned_map_s_rotation_is_learned_in_the_outage() -> None:
     figures = {}
     for on in (True, False):
         runs = run_methods(
-            inputs, with_values(Params(), {KEY: on}), methods=("baseline", "proposed")
+            inputs,
+            with_values(Params(), {**SESSION_11_FIT, KEY: on}),
+            methods=("baseline", "proposed"),
         )
         for method in ("baseline", "proposed"):
             err, nees = outage_errors(runs[method], log, frame)

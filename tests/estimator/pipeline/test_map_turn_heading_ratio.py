@@ -11,6 +11,7 @@ from estimator.evaluation.metrics import method_metrics
 from estimator.params import Params, with_values
 from estimator.pipeline import open_inputs, run_methods
 from estimator.sim.stress import moved_route
+from tests._session11_fit import SESSION_11_FIT
 
 SAMPLES = Path(__file__).resolve().parents[3] / "sample_logs"
 KEY = "offset.map_turn_min_heading_ratio"
@@ -19,13 +20,15 @@ KEY = "offset.map_turn_min_heading_ratio"
 def test_an_unturned_map_moved_is_not_turned_by_the_heading_drift() -> None:
     """Monaco on its route moved 10 m along and 3.5 m across (not turned): the approach fits
     0.2 deg of rotation, not applied, with a prior sigma (0.14 deg) below the heading's at the
-    portal (0.145 deg). Estimated, the matches learn the heading's drift as the map's rotation."""
+    portal (0.145 deg). Estimated, the matches learn the heading's drift as the map's rotation.
+    With session 11's approach (800 m): the 1600 m one's rotation (within two of its sigmas) is
+    not considered at all."""
     inp = open_inputs(SAMPLES / "monaco_tunnel.mcap", SAMPLES / "monaco_tunnel.route.geojson")
     assert inp.route is not None
     moved = dataclasses.replace(inp, route=moved_route(inp.route))
     rmse, turns = {}, {}
     for ratio in (Params().offset.map_turn_min_heading_ratio, 0.0):
-        runs = run_methods(moved, with_values(Params(), {KEY: ratio}))
+        runs = run_methods(moved, with_values(Params(), {**SESSION_11_FIT, KEY: ratio}))
         for method in ("baseline", "proposed"):
             r = runs[method]
             mm = method_metrics(

@@ -15,6 +15,7 @@ from estimator.params import Params, with_values
 from estimator.pipeline import run_methods
 from estimator.pipeline.driver import release_turn
 from estimator.sim.stress import build, drive_spec
+from tests._session11_fit import SESSION_11_FIT
 
 KEY = "extensions.map_turn_release"
 
@@ -52,7 +53,8 @@ def test_drive_10_leaves_its_first_tunnel_with_an_honest_heading() -> None:
     only within its noise, so the first tunnel's bias is applied unturned and its rotation
     considered as the method of moments' zero. The route updates turned the heading to the
     map's with a 0.05 deg sigma; without the release the next tunnel starts 0.7 deg off and
-    the drive ends worse than dead reckoning."""
+    the drive ends worse than dead reckoning. With session 11's approach (800 m): the 1600 m
+    one fits the rotation closer, and the heading is not left off."""
     spec = drive_spec(10)
     inputs = build(spec).inputs
     log, frame = inputs.log, inputs.frame
@@ -62,7 +64,9 @@ def test_drive_10_leaves_its_first_tunnel_with_an_honest_heading() -> None:
     figures = {}
     for on in (True, False):
         runs = run_methods(
-            inputs, with_values(Params(), {KEY: on}), methods=("baseline", "proposed")
+            inputs,
+            with_values(Params(), {**SESSION_11_FIT, KEY: on}),
+            methods=("baseline", "proposed"),
         )
         for method in ("baseline", "proposed"):
             run = runs[method]

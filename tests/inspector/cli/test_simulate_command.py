@@ -60,7 +60,7 @@ def test_imu_rate_and_perfect(tmp_path) -> None:
 def _truth_rmse(inputs) -> tuple[float, tuple[str, ...], list[bool]]:
     from estimator.evaluation.metrics import method_metrics
     from estimator.pipeline import run_methods
-    from tests._undoing import undoing_params
+    from tests._session11_fit import undoing_params
 
     run = run_methods(inputs, undoing_params(), methods=("proposed",))["proposed"]
     truth = method_metrics(run, inputs.route, inputs.log).truth

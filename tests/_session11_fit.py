@@ -1,8 +1,8 @@
-"""Corpus drives whose route updates the dead-reckoning separation gate undoes, as its tests
-run them. With today's map-bias fit (the 1600 m approach, an unapplied rotation considered
-beyond two of its sigmas) drive 5's matches no longer pull the estimate away from dead
-reckoning, nor does drive 10's first tunnel on the road as driven; the tests run them with
-the fit that did (session 11's defaults)."""
+"""Session 11's map-bias fit (the 800 m approach, the method of moments for an unapplied
+rotation), for tests of mechanisms that today's fit (the 1600 m approach, an unapplied
+rotation considered beyond two of its sigmas) no longer exercises on their corpus drive:
+drive 5's matches pulling the estimate away from dead reckoning (undone by
+``dr_separation``), drive 10's first tunnel undone on the road as driven, and the like."""
 
 from __future__ import annotations
 
