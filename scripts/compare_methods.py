@@ -133,22 +133,17 @@ BIASED_RUNS = {
         "proposed",
         {"offset.map_bias_walk_m_per_sqrt_km": 0.0},
     ),
-    "routefuse, `offset.map_bias_track_m` 1600": (
+    "routefuse, `offset.map_turn_lower_sigmas` 0": (
         "proposed",
-        {"offset.map_bias_track_m": 1600.0},
+        {"offset.map_turn_lower_sigmas": 0.0},
     ),
-    "routefuse, `offset.map_bias_track_m` 1600 + `offset.map_turn_lower_sigmas` 2": (
+    "routefuse, `offset.map_bias_track_m` 800, `offset.map_turn_lower_sigmas` 0": (
         "proposed",
-        {"offset.map_bias_track_m": 1600.0, "offset.map_turn_lower_sigmas": 2.0},
+        {"offset.map_bias_track_m": 800.0, "offset.map_turn_lower_sigmas": 0.0},
     ),
-    "routefuse, `offset.map_bias_track_m` 1600 + `offset.map_turn_lower_sigmas` 2 "
-    "+ `offset.map_bias_wander_rows`": (
+    "routefuse + `offset.map_bias_wander_rows`": (
         "proposed",
-        {
-            "offset.map_bias_track_m": 1600.0,
-            "offset.map_turn_lower_sigmas": 2.0,
-            "offset.map_bias_wander_rows": True,
-        },
+        {"offset.map_bias_wander_rows": True},
     ),
     "routefuse, `gyro_scale_consider` off": (
         "proposed",
