@@ -150,9 +150,16 @@ def alternative_gate(
 
 
 def gate_table(
-    shape: ShapeValues, validation: Validation | None, correction_m: float, params: Params
+    shape: ShapeValues,
+    validation: Validation | None,
+    correction_m: float,
+    params: Params,
+    *,
+    search_m: float = 0.0,
 ) -> tuple[GateDecision, ...]:
-    """Every gate of a fitted attempt, in :class:`Gate` order."""
+    """Every gate of a fitted attempt, in :class:`Gate` order; ``search_m``: the half-width of
+    the along-track search the fit was made in (the correction cap with
+    ``extensions.search_correction_cap``)."""
     g = params.gates
     table = shape_gates(shape, g)
     if validation is not None:
@@ -162,8 +169,28 @@ def gate_table(
             alternative_gate(rival, values, rival_cost, validation.cost, g)
             for rival, values, rival_cost in validation.rivals
         ]
-    table.append(CORRECTION_CAP.decide(correction_m, g))
+    table.append(correction_cap(correction_m, g, params, search_m))
     return tuple(table)
+
+
+def correction_cap(
+    correction_m: float, g: GateParams, params: Params, search_m: float
+) -> GateDecision:
+    """``gates.max_correction_m``, or with ``extensions.search_correction_cap`` and
+    ``covariance_search`` the along-track search's half-width where that is wider: the search
+    was widened to 3 sigma of the filter's own along-track position because the filter may be
+    that far off, so a correction that far is what it was looking for, not a blunder."""
+    ext = params.extensions
+    if not (ext.search_correction_cap and ext.covariance_search) or search_m <= g.max_correction_m:
+        return CORRECTION_CAP.decide(correction_m, g)
+    return GateDecision(
+        CORRECTION_CAP.gate,
+        float(correction_m),
+        float(search_m),
+        CORRECTION_CAP.comparison,
+        float(correction_m) <= search_m,
+        "|z - p_dr|, m (cap: the along-track search's half-width)",
+    )
 
 
 def unpaired_table(window_points: int, params: Params) -> tuple[GateDecision, ...]:

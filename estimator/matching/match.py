@@ -60,6 +60,8 @@ class Scores:
     extra: dict[str, float]
     """the validation's chi-square and costs, for display"""
     correction: float
+    search_m: float
+    """half-width of the along-track search the fit was made in, m"""
 
 
 @dataclass(frozen=True)
@@ -288,6 +290,7 @@ def _scores(
         validation=validation,
         extra=extra,
         correction=float(np.hypot(*nu)),
+        search_m=float(search),
     )
 
 
@@ -343,7 +346,7 @@ def judge_match(
             anchor_s=geometry.s_anchor,
             window_length_m=geometry.span,
         )
-    gates = gate_table(sc.shape, sc.validation, sc.correction, params)
+    gates = gate_table(sc.shape, sc.validation, sc.correction, params, search_m=sc.search_m)
     return MatchRecord(
         index=index,
         t=t,

@@ -660,12 +660,23 @@ class ExtensionParams:
         "outage, so the covariance after a bend's along-track correction covers the regrowth; "
         "on through no_wheel_caution",
     )
+    search_correction_cap: bool = param(
+        False,
+        "with covariance_search, a match's correction |z - p_dr| is capped at the half-width "
+        "the along-track search was widened to (3 sigma of the filter's own along-track "
+        "position, up to window.along_search_max_m) where that exceeds gates.max_correction_m: "
+        "a correction the search was widened to find, and the Mahalanobis gate lets through, "
+        "is no blunder; refused by a fixed 30 m cap, a filter that dead reckoning left 70 m "
+        "off along the road cannot be put back by the bend that shows it; on through "
+        "no_wheel_caution",
+    )
     no_wheel_caution: bool = param(
         True,
         "on a log without wheel speed, switch on covariance_search, curvature_covariance, "
         "overlap_inflation, window_scale_covariance, cross_track_heading_widen, "
-        "calibrated_approach and along_drift_evidence (the dead-reckoned along-track position "
-        "is then uncertain by tens to hundreds of metres, which is what they are for) and "
+        "calibrated_approach, along_drift_evidence and search_correction_cap (the "
+        "dead-reckoned along-track position is then uncertain by tens to hundreds of metres, "
+        "which is what they are for) and "
         "offset.map_turn_honest_prior "
         "(the weak heading is otherwise turned by a map rotation the approach could not tell "
         "from zero), and switch off weak_along_track and dr_separation (the filter's own "
@@ -1044,7 +1055,9 @@ def matching_params(params: Params, *, have_wheel: bool) -> Params:
     along-track position that is uncertain by tens to hundreds of metres are on (and
     ``calibrated_approach``: an outage after too little GNSS-aided driving is dead-reckoned;
     ``along_drift_evidence``: an along-track drift the model lacks, shown by a correction
-    beyond the filter's sigma, is carried as a velocity random walk for the rest of the outage),
+    beyond the filter's sigma, is carried as a velocity random walk for the rest of the outage;
+    ``search_correction_cap``: a correction as far as the widened search looked is not refused
+    by the fixed cap),
     ``weak_along_track`` and ``dr_separation`` are off (the filter's along-track is then no
     yardstick for a fit, and dead reckoning's covariance none for the route updates: on the
     real comma2k19 log without its wheels it undid updates that beat dead reckoning), and
@@ -1065,6 +1078,7 @@ def matching_params(params: Params, *, have_wheel: bool) -> Params:
         cross_track_heading_widen=True,
         calibrated_approach=True,
         along_drift_evidence=True,
+        search_correction_cap=True,
     )
     offset = replace(params.offset, map_turn_honest_prior=True)
     if cautious == ext and offset == params.offset:

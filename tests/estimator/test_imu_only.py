@@ -15,8 +15,9 @@ from estimator.filter import layout as ly
 from estimator.filter.gnss import widen_heading
 from estimator.io import TopicChoice
 from estimator.matching.fit import FitSettings, _bend_variance, fit_window
+from estimator.matching.gates import ShapeValues, gate_table
 from estimator.matching.geometry import Polyline
-from estimator.matching.match import search_half_width
+from estimator.matching.match import match_window, search_half_width
 from estimator.params import Params, for_method, load_params, matching_params, with_values
 from estimator.pipeline import open_inputs, run_methods
 from estimator.pipeline.driver import (
@@ -25,6 +26,7 @@ from estimator.pipeline.driver import (
     grow_along_velocity,
     window_scale_sigma,
 )
+from estimator.results import Gate
 from estimator.route import Route
 from estimator.sim.imu_only import build_imu_only, imu_only_spec
 from estimator.sim.stress import build, drive_spec
@@ -56,6 +58,7 @@ def test_the_caution_is_only_for_logs_without_wheel_speed() -> None:
     assert ext.cross_track_heading_widen and not p.extensions.cross_track_heading_widen
     assert ext.calibrated_approach and not p.extensions.calibrated_approach
     assert ext.along_drift_evidence and not p.extensions.along_drift_evidence
+    assert ext.search_correction_cap and not p.extensions.search_correction_cap
     assert not p.offset.map_turn_honest_prior
     off = with_values(p, {"extensions.no_wheel_caution": False})
     assert matching_params(off, have_wheel=False) is off
@@ -396,3 +399,38 @@ def test_the_scripts_values_reach_routefuse_or_with_everywhere_every_run() -> No
         assert (only == {**own, **values}) == (label == "routefuse")
         assert run_values_of(label, own, values, everywhere=True) == {**own, **values}
         assert run_values_of(label, own, None, everywhere=True) == own
+
+
+def test_a_correction_the_widened_search_found_is_not_capped_at_30_m() -> None:
+    """A corner dead-reckoned 70 m short along the road, the filter claiming 60 m per axis:
+    the widened search (180 m) finds the corner, and the fixed 30 m cap refused that correction
+    unless ``extensions.search_correction_cap`` caps it at the search's half-width."""
+    route = Route(np.array([[0.0, 0.0], [600.0, 0.0], [600.0, 600.0]]))
+    truth = route.point_at(np.arange(450.0, 700.0 + 1e-9, 2.0))
+    window = truth - np.array([70.0, 0.0])
+    cov = np.diag([60.0**2, 60.0**2])
+    base = {"extensions.covariance_search": True, "extensions.candidate_validation": False}
+    decisions = {}
+    for on in (False, True):
+        p = with_values(Params(), {**base, "extensions.search_correction_cap": on})
+        rec = match_window(
+            window,
+            window[-1],
+            cov,
+            route,
+            s_guess=630.0,
+            lane_offset=0.0,
+            params=p,
+            index=0,
+            t=0.0,
+            epoch=0,
+        )
+        assert rec.fit is not None
+        assert np.hypot(*rec.innovation) == pytest.approx(70.0, abs=3.0)
+        decisions[on] = next(d for d in rec.gates if d.gate is Gate.CORRECTION_CAP)
+    assert not decisions[False].passed and decisions[False].threshold == 30.0
+    assert decisions[True].passed and decisions[True].threshold == pytest.approx(180.0)
+    # without the widened search the cap stays the fixed one
+    p = with_values(Params(), {"extensions.search_correction_cap": True})
+    capped = gate_table(ShapeValues(40, 1.0, 0.1, 0.1), None, 70.0, p, search_m=180.0)[-1]
+    assert capped.gate is Gate.CORRECTION_CAP and not capped.passed
