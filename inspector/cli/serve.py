@@ -304,15 +304,16 @@ def execute(args: argparse.Namespace) -> int:
             flush=True,
         )
 
-    controller.subscribe(
-        on_progress=TerminalProgress(),
-        on_session=loaded,
-        on_error=lambda exc: print(f"routefuse: error: {exc}", file=sys.stderr, flush=True),
-    )
-    open_first(controller, log, route, outages)  # after subscribing: an early failure prints
-    for warning in controller.folders.listing().warnings:
-        print(f"routefuse serve: warning: {warning[:300]}", file=sys.stderr, flush=True)
+    # Ctrl+C from here on, during the first load too, closes the server as at any later time
     try:
+        controller.subscribe(
+            on_progress=TerminalProgress(),
+            on_session=loaded,
+            on_error=lambda exc: print(f"routefuse: error: {exc}", file=sys.stderr, flush=True),
+        )
+        open_first(controller, log, route, outages)  # after subscribing: an early failure prints
+        for warning in controller.folders.listing().warnings:
+            print(f"routefuse serve: warning: {warning[:300]}", file=sys.stderr, flush=True)
         while True:
             time.sleep(0.5)
     except KeyboardInterrupt:
