@@ -110,8 +110,11 @@ def test_transfers_in_flight_count_against_the_folder_cap(upload_tab):
 
 
 _HOLDER = """
-import sys, time
+import signal, sys, time
 from inspector.folders import UploadFolder, exit_on_termination_signals
+# Ctrl+C as a shell's foreground process gets it (started from a background job, this
+# process would inherit SIGINT ignored)
+signal.signal(signal.SIGINT, signal.default_int_handler)
 exit_on_termination_signals()
 up = UploadFolder()
 (up.path / "part.mcap").write_bytes(b"x")

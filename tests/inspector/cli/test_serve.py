@@ -3,6 +3,7 @@
 from __future__ import annotations
 
 import _thread
+import signal
 import socket
 import threading
 import time
@@ -97,11 +98,15 @@ def test_execute_warns_on_a_public_host_and_prints_the_url(tmp_path, capsys):
             _thread.interrupt_main()
             done.wait(2.0)
 
+    # Ctrl+C as a shell delivers it, whatever an earlier test in this process left installed
+    # (interrupt_main does nothing while SIGINT is ignored)
+    previous = signal.signal(signal.SIGINT, signal.default_int_handler)
     threading.Thread(target=interrupt_when_served, daemon=True).start()
     try:
         code = serve.execute(args)
     finally:
         done.set()
+        signal.signal(signal.SIGINT, previous)
     assert code == 0
     out, err = capsys.readouterr()
     assert f"http://127.0.0.1:{port}" in out
