@@ -6,17 +6,14 @@ and tests/e2e/test_inspector.py; the warning for a public --host in test_serve.p
 
 from __future__ import annotations
 
-import _thread
 import socket
 import stat
-import threading
-import time
-import urllib.request
 from pathlib import Path
 
 from inspector.cli import serve
 from inspector.cli.main import build_parser
 from inspector.controller import UploadFolder
+from tests.inspector._ctrl_c import ctrl_c_when_served
 
 
 def _free_port() -> int:
@@ -54,20 +51,12 @@ def test_without_host_the_server_listens_on_loopback_only_and_does_not_warn(tmp_
     args = build_parser().parse_args(["serve", str(log), "--port", str(port)])
     seen: dict[str, set[str]] = {}
 
-    def look_then_interrupt() -> None:
-        deadline = time.monotonic() + 30
-        while time.monotonic() < deadline:
-            try:
-                urllib.request.urlopen(f"http://127.0.0.1:{port}/", timeout=2).read(100)
-                break
-            except OSError:
-                time.sleep(0.2)
+    def look() -> None:
         seen["addresses"] = _listening_addresses(port)
-        time.sleep(1.0)
-        _thread.interrupt_main()
 
-    threading.Thread(target=look_then_interrupt, daemon=True).start()
-    assert serve.execute(args) == 0
+    with ctrl_c_when_served(port, then=look, settle_s=1.0):
+        code = serve.execute(args)
+    assert code == 0
     _, err = capsys.readouterr()
     assert "warning: binding" not in err
     assert f"routefuse: error: {log}" in err, "the failed first load was not reported"

@@ -2,12 +2,7 @@
 
 from __future__ import annotations
 
-import _thread
-import signal
 import socket
-import threading
-import time
-import urllib.request
 from types import SimpleNamespace
 
 import pytest
@@ -15,6 +10,7 @@ import pytest
 from estimator.errors import RoutefuseError
 from inspector.cli import serve
 from inspector.cli.main import build_parser
+from tests.inspector._ctrl_c import ctrl_c_when_served
 
 
 def _free_port() -> int:
@@ -82,31 +78,8 @@ def test_execute_warns_on_a_public_host_and_prints_the_url(tmp_path, capsys):
     port = _free_port()
     args = build_parser().parse_args(["serve", str(log), "--host", "0.0.0.0", "--port", str(port)])
 
-    done = threading.Event()
-
-    def interrupt_when_served() -> None:
-        deadline = time.monotonic() + 30
-        while time.monotonic() < deadline:
-            try:
-                urllib.request.urlopen(f"http://127.0.0.1:{port}/", timeout=2).read(100)
-                break
-            except OSError:
-                time.sleep(0.2)
-        time.sleep(2.0)  # let the (failing) load report
-        # again until served: on a loaded machine one Ctrl+C may land before the serve loop
-        while not done.is_set():
-            _thread.interrupt_main()
-            done.wait(2.0)
-
-    # Ctrl+C as a shell delivers it, whatever an earlier test in this process left installed
-    # (interrupt_main does nothing while SIGINT is ignored)
-    previous = signal.signal(signal.SIGINT, signal.default_int_handler)
-    threading.Thread(target=interrupt_when_served, daemon=True).start()
-    try:
+    with ctrl_c_when_served(port):
         code = serve.execute(args)
-    finally:
-        done.set()
-        signal.signal(signal.SIGINT, previous)
     assert code == 0
     out, err = capsys.readouterr()
     assert f"http://127.0.0.1:{port}" in out
