@@ -20,6 +20,7 @@ from typing import Any, Literal
 import numpy as np
 from numpy.typing import NDArray
 
+from estimator.errors import RouteError
 from estimator.matching import project_on_route, track_on_route
 from estimator.params import Params
 from estimator.results import MatchRecord
@@ -96,12 +97,12 @@ def _moved_distance(m: MatchRecord, t: F64, xy: F64, t0: float) -> float:
     if at < t[0] or at > t[-1]:
         return float("nan")
     p = np.array([np.interp(at, t, xy[:, 0]), np.interp(at, t, xy[:, 1])])
-    a, b = seg[:-1], seg[1:]
-    ab = b - a
-    length2 = np.maximum(np.einsum("ij,ij->i", ab, ab), 1e-12)
-    u = np.clip(np.einsum("ij,ij->i", p - a, ab) / length2, 0.0, 1.0)
-    foot = a + u[:, None] * ab
-    return float(np.min(np.hypot(*(p - foot).T)))
+    try:
+        segment = Route(seg)
+    except RouteError:  # a segment of repeated or non-finite points: no distance to tell
+        return float("nan")
+    _, foot = _nearest(segment, p[None, :])
+    return float(np.hypot(*(p - foot[0])))
 
 
 def _spans(t: F64, mask: NDArray[np.bool_]) -> tuple[tuple[float, float], ...]:

@@ -7,7 +7,7 @@ from __future__ import annotations
 
 import functools
 from collections.abc import Callable
-from dataclasses import dataclass
+from dataclasses import dataclass, replace
 from typing import NamedTuple
 
 import numpy as np
@@ -183,13 +183,10 @@ def correction_cap(
     ext = params.extensions
     if not (ext.search_correction_cap and ext.covariance_search) or search_m <= g.max_correction_m:
         return CORRECTION_CAP.decide(correction_m, g)
-    return GateDecision(
-        CORRECTION_CAP.gate,
-        float(correction_m),
-        float(search_m),
-        CORRECTION_CAP.comparison,
-        float(correction_m) <= search_m,
-        "|z - p_dr|, m (cap: the along-track search's half-width)",
+    return CORRECTION_CAP.decide(
+        correction_m,
+        replace(g, max_correction_m=search_m),
+        note="|z - p_dr|, m (cap: the along-track search's half-width)",
     )
 
 

@@ -503,6 +503,7 @@ def _relinearised_fit(
     xy: F64,
     route: Route,
     end_s: float,
+    rows: tuple[F64, F64, F64, F64],
     track_var: F64 | None,
     track_cov: F64,
     P0: F64,
@@ -512,23 +513,24 @@ def _relinearised_fit(
     passes: int,
     track_t: F64 | None = None,
 ) -> tuple[F64, F64, F64, tuple[F64, F64, F64, F64]] | None:
-    """:func:`_fit_with_shape` on the approach's rows (:func:`_turned_rows`) repeated
-    ``passes`` times, each against the route moved back by the fit so far (Gauss-Newton: the
-    increment's prior is the prior less what is moved back, and the bias field being linear
-    in shift and rotation about the end, the increments add). Distances to a route tens of
+    """:func:`_fit_with_shape` on the approach's ``rows`` against ``route``
+    (:func:`_turned_rows`), then ``passes - 1`` times more on its rows against the route moved
+    back by the fit so far (Gauss-Newton: the increment's prior is the prior less what is
+    moved back, and the bias field being linear in shift and rotation about the end, the
+    increments add). Distances to a route tens of
     metres off are not linear in the shift where the route bends, so only the last pass's
     residual tells whether the track follows the route."""
     moved_by = np.zeros(4)
+    moved, s_moved = route, end_s
     fit = None
     for k in range(passes):
-        moved = route
-        s_moved = end_s
         if fit is not None:
             moved = Route(xy_moved_back(route.xy, moved_by[1:3], float(moved_by[3]), xy[-1]))
             s_moved = float(moved.project(xy[-1:], end_s, params.window.route_search_m).s[0])
-        rows = _turned_rows(xy, moved, s_moved, track_var, track_cov, params, track_t)
-        if rows is None:
-            return None
+            moved_rows = _turned_rows(xy, moved, s_moved, track_var, track_cov, params, track_t)
+            if moved_rows is None:
+                return None
+            rows = moved_rows
         step = _fit_with_shape(
             *rows,
             P0,
@@ -552,6 +554,7 @@ def _far_turned_fit(
     xy: F64,
     route: Route,
     end_s: float,
+    rows: tuple[F64, F64, F64, F64],
     track_var: F64 | None,
     track_cov: F64,
     P0: F64,
@@ -573,6 +576,7 @@ def _far_turned_fit(
         xy,
         route,
         end_s,
+        rows,
         track_var,
         track_cov,
         wide,
@@ -639,7 +643,7 @@ def learn_map_bias(
     if rows is None:
         return prior
     end = xy[-1]
-    A, d, nrm, weights = rows
+    A, d, nrm, weights = lateral = rows
     P0 = np.zeros((4, 4))
     P0[0, 0] = op.map_bias_lane_sigma_m**2
     P0[1:3, 1:3] = _prior_cov(params, normal_end)
@@ -651,7 +655,9 @@ def learn_map_bias(
     fit = _fit_with_shape(A, d, nrm, weights, P0, mean, xy, track_cov, route, end_s, params)
     far = None
     if op.map_bias_far_turned and (fit is None or abs(fit[0][0]) > op.max_offset_m):
-        far = _far_turned_fit(xy, route, end_s, track_var, track_cov, P0, mean, params, track_t)
+        far = _far_turned_fit(
+            xy, route, end_s, lateral, track_var, track_cov, P0, mean, params, track_t
+        )
         fit = fit if far is None else far
     if fit is None:
         return prior
@@ -729,18 +735,7 @@ def learn_map_bias(
         # and for significance as without the switch), the turned bias's values from the fit
         # whose shift prior includes the rotation's share (:func:`_turn_spread`)
         P0[1:3, 1:3] += P0[3, 3] * _turn_spread(route, end_s, end, params)
-        spread = _relinearised_fit(
-            xy,
-            route,
-            end_s,
-            track_var,
-            track_cov,
-            P0,
-            mean,
-            params,
-            passes=1,
-            track_t=track_t,
-        )
+        spread = _fit_with_shape(*lateral, P0, mean, xy, track_cov, route, end_s, params)
         if spread is not None:
             u, C, G, _ = spread
             total = C + G @ track_cov @ G.T
