@@ -86,22 +86,23 @@ def _nearest(route: Route, xy: F64) -> tuple[F64, F64]:
     return s, route.point_at(s)
 
 
-def _moved_distance(m: MatchRecord, t: F64, xy: F64, t0: float) -> float:
+def _moved_distance(m: MatchRecord, route: Route, t: F64, xy: F64, t0: float) -> float:
     """The distance of the vehicle (``xy`` at ``t`` s after the start) at attempt ``m`` from
-    the route segment it was matched to, when an applied map bias moved that segment; NaN
-    otherwise."""
-    seg = np.asarray(m.route_segment, np.float64)
-    if m.map_bias is None or not m.map_bias.applied or len(seg) < 2 or not len(t):
+    the route moved back by the map bias the attempt applied, NaN without one. The whole route,
+    not the segment the attempt matched: a vehicle the filter has lost along the road (no
+    odometer on a straight) is far from that segment yet on the road the route moved back
+    draws."""
+    if m.map_bias is None or not m.map_bias.applied or len(route.xy) < 2 or not len(t):
         return float("nan")
     at = m.t - t0
     if at < t[0] or at > t[-1]:
         return float("nan")
     p = np.array([np.interp(at, t, xy[:, 0]), np.interp(at, t, xy[:, 1])])
     try:
-        segment = Route(seg)
-    except RouteError:  # a segment of repeated or non-finite points: no distance to tell
+        moved = Route(route.xy - m.map_bias.at(route.xy))
+    except RouteError:  # a bias that is not finite: no distance to tell
         return float("nan")
-    _, foot = _nearest(segment, p[None, :])
+    _, foot = _nearest(moved, p[None, :])
     return float(np.hypot(*(p - foot[0])))
 
 
@@ -130,9 +131,9 @@ class OffRoute:
     refused: tuple[str | None, ...]
     """per match attempt: the off-route gate that refused it, or None"""
     moved_distance_m: tuple[float, ...] = ()
-    """per match attempt: the vehicle's distance from the route segment it was matched to,
-    which an applied map bias (``extensions.map_bias``) moved back from where the map draws
-    it; NaN for an attempt without an applied bias"""
+    """per match attempt: the vehicle's distance from the route moved back by the map bias the
+    attempt applied (``extensions.map_bias``) from where the map draws it; NaN for an attempt
+    without an applied bias"""
 
     @classmethod
     def build(cls, scene: Any, route: Route, params: Params) -> OffRoute:
@@ -157,7 +158,7 @@ class OffRoute:
             spans=_spans(t, off),
             refused=tuple(refused_off_route(m) for m in scene.matches),
             moved_distance_m=tuple(
-                _moved_distance(m, t[ok], xy[ok], scene.t0) for m in scene.matches
+                _moved_distance(m, route, t[ok], xy[ok], scene.t0) for m in scene.matches
             ),
         )
 

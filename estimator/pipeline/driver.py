@@ -182,7 +182,8 @@ def run(
         + gnss_acceptance_warnings(log, epochs, inputs.degraded)
         + separation_warnings(driver.records, log.t_start, p)
         + reacquire_warnings(driver.records, log.t_start)
-        + approach_warnings(driver.checkpoints, driver.inp.degraded, log.t_start, p),
+        + approach_warnings(driver.checkpoints, driver.inp.degraded, log.t_start, p)
+        + unplaced_along_warnings(epochs, driver.records, inputs.degraded, log.t_start),
         _reuse=state,
     )
 
@@ -273,6 +274,44 @@ def approach_warnings(
             f"trigger.min_approach_m {p.trigger.min_approach_m:g} m without wheel speed), too "
             "little to calibrate the heading and the accelerometer for them; the outage is "
             "dead-reckoned"
+        )
+    return tuple(lines)
+
+
+UNPLACED_SIGMA_M = 20.0
+"""the position's horizontal 1-sigma above which a route-held outage is reported: several
+car lengths, more than the spacing of the junctions and exits a user reads a trace against"""
+
+
+def unplaced_along_warnings(
+    epochs: Epochs,
+    records: Sequence[MatchRecord],
+    degraded: Sequence[tuple[float, float]],
+    t_start: float,
+) -> tuple[str, ...]:
+    """One line per outage whose position the filter itself did not know to
+    ``UNPLACED_SIGMA_M`` while it accepted route updates. The updates hold the position across
+    the road, so the trace sits on the route and every attempt reads "accepted"; but where the
+    road runs straight they cannot tell where along it the vehicle is, and there the run is
+    dead reckoning's (without wheel speed its along-track error grows with the square of the
+    time). The route-relative deviation cannot show this; the filter's own sigma does."""
+    sigma = np.hypot(epochs.position_sigma[:, 0], epochs.position_sigma[:, 1])
+    lines = []
+    for a, b in degraded:
+        accepted = sum(1 for r in records if r.accepted and a <= r.t <= b)
+        inside = np.flatnonzero((epochs.t >= a) & (epochs.t <= b))
+        over = inside[sigma[inside] > UNPLACED_SIGMA_M]
+        if accepted == 0 or len(over) == 0:
+            continue
+        peak = over[np.argmax(sigma[over])]
+        lasting = float(np.diff(epochs.t[inside])[sigma[inside[1:]] > UNPLACED_SIGMA_M].sum())
+        lines.append(
+            f"outage {a - t_start:.1f}-{b - t_start:.1f} s: {accepted} route updates "
+            f"accepted, yet the position's 1-sigma passed {UNPLACED_SIGMA_M:g} m at "
+            f"{epochs.t[over[0]] - t_start:.1f} s and reached {sigma[peak]:.0f} m at "
+            f"{epochs.t[peak] - t_start:.1f} s ({lasting:.0f} s over {UNPLACED_SIGMA_M:g} m): "
+            "the route holds it across the road; on a straight road only dead reckoning places "
+            "it along, so the trace sits on the route unknown along it"
         )
     return tuple(lines)
 
