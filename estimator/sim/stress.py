@@ -46,6 +46,8 @@ FAULT_CYCLE: tuple[Fault, ...] = (
 )
 """the fault of drive i is FAULT_CYCLE[i % 10] (and every drive has some map bias)"""
 PARALLEL_SHIFT_M = 25.0
+HELD_OUT_SEED_STRIDE = 100_000
+"""a held-out corpus K simulates drive i with seed 1000 + i + K * this (corpus 0: 1000 + i)"""
 M_PER_DEG_LAT = 111_320.0
 
 
@@ -65,11 +67,16 @@ class DriveSpec:
     wheel_scale_error: float
     first_fix_off_m: float
     imu_gap_s: float
+    corpus: int = 0
+    """0: the corpus the defaults were chosen with; 1, 2, ...: held-out corpora, the same
+    faults in the same proportions drawn afresh (and simulated with other seeds), on which no
+    default was ever tried before it was chosen"""
 
     @property
     def name(self) -> str:
-        """the drive's file name (``routefuse simulate --stress N`` writes ``stress_N.*``)"""
-        return f"stress_{self.index}"
+        """the drive's file name (``routefuse simulate --stress N [--corpus K]`` writes
+        ``stress_N.*``, ``stress_cK_N.*``)"""
+        return f"stress_{self.index}" if self.corpus == 0 else f"stress_c{self.corpus}_{self.index}"
 
     @property
     def route_is_right(self) -> bool:
@@ -77,14 +84,20 @@ class DriveSpec:
         return self.fault not in ("parallel_road", "reversed_route")
 
 
-def drive_spec(index: int) -> DriveSpec:
-    """The faults of corpus drive ``index`` (drawn from its own generator)."""
-    rng = np.random.default_rng([20261123, index])
+def drive_spec(index: int, *, corpus: int = 0) -> DriveSpec:
+    """The faults of drive ``index`` of ``corpus`` (drawn from its own generator). Corpus 0 is
+    the one the defaults were chosen with (its drives were studied one by one); a held-out
+    corpus (``corpus`` 1, 2, ...) draws the same kinds of fault afresh and simulates them with
+    other seeds: the figures a default was not fitted to."""
+    if corpus < 0:
+        raise ValueError(f"corpus {corpus}: 0 (the corpus) or a held-out corpus 1, 2, ...")
+    key = [20261123, index] if corpus == 0 else [20261123, index, corpus]
+    rng = np.random.default_rng(key)
     fault = FAULT_CYCLE[index % len(FAULT_CYCLE)]
     return DriveSpec(
         index=index,
         base=BASES[index % len(BASES)],
-        seed=1000 + index,
+        seed=1000 + index + HELD_OUT_SEED_STRIDE * corpus,
         fault=fault,
         bias_along_m=float(rng.uniform(0.0, 15.0)) * float(rng.choice([-1.0, 1.0])),
         bias_across_m=float(rng.uniform(0.0, 5.0)) * float(rng.choice([-1.0, 1.0])),
@@ -93,6 +106,7 @@ def drive_spec(index: int) -> DriveSpec:
         wheel_scale_error=float(rng.uniform(-0.02, 0.02)),
         first_fix_off_m=float(rng.uniform(20.0, 60.0)) if fault == "bad_first_fix" else 0.0,
         imu_gap_s=float(rng.uniform(20.0, 60.0)) if fault == "imu_gap" else 0.0,
+        corpus=corpus,
     )
 
 
@@ -158,7 +172,8 @@ class Drive:
             route.xy,
             self.inputs.frame,
             name=f"{self.spec.name} route",
-            derived_from=f"routefuse simulate --stress {self.spec.index}",
+            derived_from=f"routefuse simulate --stress {self.spec.index}"
+            + (f" --corpus {self.spec.corpus}" if self.spec.corpus else ""),
         )
         doc["features"][0]["properties"]["stress_drive"] = dataclasses.asdict(self.spec)
         return doc

@@ -19,7 +19,8 @@ NAME = "simulate"
 HELP = (
     "Simulate a drive through tunnels (truth, MEMS IMU, wheel speed, GNSS with outages) and "
     "write DIR/SCENARIO.mcap and DIR/SCENARIO.route.geojson; --list shows the scenarios, "
-    "--stress N writes drive N of the stress corpus (docs/integrity.md) as DIR/stress_N.*."
+    "--stress N writes drive N of the stress corpus (docs/integrity.md) as DIR/stress_N.*, "
+    "--stress N --corpus K drive N of held-out corpus K as DIR/stress_cK_N.*."
 )
 SCENARIO_ONLY = {
     "--seed": ("seed", 0),
@@ -40,6 +41,14 @@ def add_arguments(parser: argparse.ArgumentParser) -> None:
         metavar="N",
         help="instead of a scenario: drive N of the stress corpus, its faults and its biased or "
         "trap route as the corpus builds them",
+    )
+    parser.add_argument(
+        "--corpus",
+        type=int,
+        default=0,
+        metavar="K",
+        help="with --stress: 0 (default) the corpus the defaults were chosen with, 1, 2, ... a "
+        "held-out corpus (the same kinds of fault drawn afresh)",
     )
     parser.add_argument("--out", metavar="DIR", type=Path, help="output folder")
     parser.add_argument("--seed", type=int, default=0, help="random seed (default 0)")
@@ -115,6 +124,8 @@ def execute(args: argparse.Namespace) -> int:
         raise ConfigError(args.out, "--out exists and is not a folder")
     if args.stress is not None:
         return _stress(args)
+    if args.corpus != 0:
+        raise ConfigError("--corpus", "applies to --stress N only")
     if not 0 <= args.seed < 2**32:
         raise ConfigError("--seed", f"{args.seed} is outside [0, 2**32 - 1]")
     for flag, value in (("--imu-rate", args.imu_rate), ("--duration-scale", args.duration_scale)):
@@ -155,7 +166,9 @@ def _stress(args: argparse.Namespace) -> int:
         raise ConfigError(given[0], "does not apply to --stress (the drive's index fixes it)")
     if args.stress < 0:
         raise ConfigError("--stress", f"{args.stress} is not a corpus index (0, 1, 2, ...)")
-    spec = drive_spec(args.stress)
+    if args.corpus < 0:
+        raise ConfigError("--corpus", f"{args.corpus}: 0 or a held-out corpus 1, 2, ...")
+    spec = drive_spec(args.stress, corpus=args.corpus)
     _refuse_existing(args.out / f"{spec.name}{BAG_SUFFIX[args.storage]}", args.force)
     progress = _Progress()
     started = time.perf_counter()

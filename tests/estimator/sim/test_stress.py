@@ -16,8 +16,25 @@ def test_a_drive_is_a_pure_function_of_its_index() -> None:
     assert drive_spec(3) != drive_spec(13)
 
 
-def test_the_corpus_draws_every_fault_within_its_bounds() -> None:
-    specs = [drive_spec(i) for i in range(50)]
+def test_a_held_out_corpus_draws_afresh_and_leaves_the_corpus_as_it_was() -> None:
+    """Corpus 0 is the one every figure in docs/integrity.md was measured on: its drives must
+    not change. A held-out corpus keeps each index's base and fault but draws the rest and
+    the simulator's seed afresh, the same for the same (index, corpus)."""
+    zero = drive_spec(7)
+    assert (zero.seed, zero.corpus, zero.name) == (1007, 0, "stress_7")
+    assert zero.bias_along_m == pytest.approx(drive_spec(7, corpus=0).bias_along_m)
+    one, two = drive_spec(7, corpus=1), drive_spec(7, corpus=2)
+    assert one == drive_spec(7, corpus=1) and one.name == "stress_c1_7"
+    assert (one.base, one.fault) == (zero.base, zero.fault) == (two.base, two.fault)
+    assert len({zero.seed, one.seed, two.seed}) == 3
+    assert len({zero.bias_rotation_deg, one.bias_rotation_deg, two.bias_rotation_deg}) == 3
+    with pytest.raises(ValueError, match="corpus -1"):
+        drive_spec(7, corpus=-1)
+
+
+@pytest.mark.parametrize("corpus", [0, 1])
+def test_the_corpus_draws_every_fault_within_its_bounds(corpus: int) -> None:
+    specs = [drive_spec(i, corpus=corpus) for i in range(50)]
     assert {s.fault for s in specs} == set(FAULT_CYCLE)
     assert all(abs(s.bias_along_m) <= 15 and abs(s.bias_across_m) <= 5 for s in specs)
     assert all(abs(s.bias_rotation_deg) <= 2 and 0 <= s.gyro_bias_deg_h <= 720 for s in specs)
@@ -59,6 +76,10 @@ def test_the_runner_gives_a_row_of_finite_figures() -> None:
     for label in RUNS:
         assert np.isfinite(row[f"{label}_truth_rmse_m"]) and np.isfinite(row[f"{label}_nees_mean"])
     assert "| all (1) | baseline |" in summary([row])
+    held = run_drive(1, corpus=1)
+    assert (held["corpus"], row["corpus"]) == (1, 0)
+    assert held["bias_rotation_deg"] != row["bias_rotation_deg"]
+    assert summary([held], 1).startswith("Held-out corpus 1: 1 drives")
 
 
 def test_the_control_drives_the_road_and_keeps_the_trap() -> None:

@@ -117,8 +117,28 @@ def test_stress_without_odometer_and_errors(tmp_path, capsys) -> None:
         (["--stress", "-1"], "--stress: -1 is not a corpus index"),
         (["--stress", "2", "--seed", "4"], "--seed: does not apply to --stress"),
         (["--stress", "2", "--perfect"], "--perfect: does not apply to --stress"),
+        (["--stress", "2", "--corpus", "-1"], "--corpus: -1: 0 or a held-out corpus"),
+        (["short_tunnel", "--corpus", "1"], "--corpus: applies to --stress N only"),
     ):
         assert main(["simulate", *argv, "--out", str(tmp_path)]) == 2
         err = capsys.readouterr().err.strip()
         assert message in err and "\n" not in err, err
     assert main(["simulate", "--stress", "2", "--out", str(tmp_path), "--force"]) == 0
+
+
+def test_a_held_out_stress_drive_is_written_under_its_own_name(tmp_path, capsys) -> None:
+    """``--corpus K`` writes drive N of held-out corpus K beside corpus 0's drive N, with its
+    own draws, and the route file says which corpus it came from."""
+    import json
+
+    from estimator.sim.stress import drive_spec
+
+    held = drive_spec(2, corpus=1)
+    assert held.fault == "no_odometer" and held != drive_spec(2)
+    assert main(["simulate", "--stress", "2", "--corpus", "1", "--out", str(tmp_path)]) == 0
+    out = capsys.readouterr().out
+    assert f"{held.bias_along_m:+.2f} m along" in out
+    doc = json.loads((tmp_path / "stress_c1_2.route.geojson").read_text())
+    props = doc["features"][0]["properties"]
+    assert props["stress_drive"]["corpus"] == 1 and props["stress_drive"]["seed"] == held.seed
+    assert (tmp_path / "stress_c1_2.mcap").exists() and not (tmp_path / "stress_2.mcap").exists()
