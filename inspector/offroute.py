@@ -20,10 +20,9 @@ from typing import Any, Literal
 import numpy as np
 from numpy.typing import NDArray
 
-from estimator.errors import RouteError
 from estimator.matching import project_on_route, track_on_route
 from estimator.params import Params
-from estimator.results import MatchRecord
+from estimator.results import MapBiasUse, MatchRecord
 from estimator.route import Route
 
 F64 = NDArray[np.float64]
@@ -91,19 +90,32 @@ def _moved_distance(m: MatchRecord, route: Route, t: F64, xy: F64, t0: float) ->
     the route moved back by the map bias the attempt applied, NaN without one. The whole route,
     not the segment the attempt matched: a vehicle the filter has lost along the road (no
     odometer on a straight) is far from that segment yet on the road the route moved back
-    draws."""
+    draws. Measured as the point the moving back takes onto the vehicle, from the route as
+    drawn (the moving back is a shift and a small turn, which keep distances to within the
+    turn's square): one projection onto the route, not a moved copy of it per attempt."""
     if m.map_bias is None or not m.map_bias.applied or len(route.xy) < 2 or not len(t):
         return float("nan")
     at = m.t - t0
     if at < t[0] or at > t[-1]:
         return float("nan")
     p = np.array([np.interp(at, t, xy[:, 0]), np.interp(at, t, xy[:, 1])])
-    try:
-        moved = Route(route.xy - m.map_bias.at(route.xy))
-    except RouteError:  # a bias that is not finite: no distance to tell
+    drawn = _moved_back_from(m.map_bias, p)
+    if not np.all(np.isfinite(drawn)):
         return float("nan")
-    _, foot = _nearest(moved, p[None, :])
-    return float(np.hypot(*(p - foot[0])))
+    _, foot = _nearest(route, drawn[None, :])
+    return float(np.hypot(*(drawn - foot[0])))
+
+
+def _moved_back_from(bias: MapBiasUse, y: F64) -> F64:
+    """The point of the route as drawn that the map bias moves back onto ``y``: the inverse of
+    :func:`estimator.matching.map_bias.xy_moved_back`, ``y = x - offset - r J (x - pivot)``."""
+    r = bias.rotation_rad
+    if r == 0.0 or not np.all(np.isfinite(bias.pivot)):
+        out: F64 = y + bias.offset
+        return out
+    turn = np.array([[1.0, r], [-r, 1.0]])  # I - r J, J the quarter turn to the left
+    out = bias.pivot + np.linalg.solve(turn, y - bias.pivot + bias.offset)
+    return out
 
 
 def _spans(t: F64, mask: NDArray[np.bool_]) -> tuple[tuple[float, float], ...]:

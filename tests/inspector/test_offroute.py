@@ -247,3 +247,29 @@ def test_a_route_moved_back_by_an_applied_map_bias_is_what_off_route_is_judged_a
     assert "OFF-ROUTE as the map draws it" in head and "1.0 m from it moved back" in head
     assert "a match onto it is expected" in head and "no match" not in head
     assert "no match onto the route is expected here" in off.panel_text(at, 1)
+
+
+def test_the_point_moved_back_onto_the_vehicle_is_found_exactly_for_a_turned_bias():
+    """The Match tab measures the vehicle from the route moved back by a turned bias as the
+    point of the route as drawn that the moving back takes onto it: the exact inverse of the
+    estimator's moving back, not its first order (at 3 km from the pivot of a 2 deg turn the
+    first order is 2.6 m off, a third of the off-route limit)."""
+    from estimator.matching.map_bias import xy_moved_back
+    from estimator.results import MapBiasUse
+    from inspector.offroute import _moved_back_from
+
+    rotation = np.radians(2.0)
+    bias = MapBiasUse(
+        offset=np.array([4.0, -30.0]),
+        cov=np.eye(2),
+        along_observed=True,
+        applied=True,
+        rotation_rad=rotation,
+        pivot=np.array([1000.0, 500.0]),
+    )
+    drawn = np.array([[4000.0, 600.0], [1000.0, 500.0], [-200.0, 2500.0]])
+    road = xy_moved_back(drawn, bias.offset, rotation, bias.pivot)
+    back = np.array([_moved_back_from(bias, y) for y in road])
+    np.testing.assert_allclose(back, drawn, atol=1e-9)
+    first_order = road[0] + bias.at(road[0])
+    assert np.hypot(*(first_order - drawn[0])) > 2.5
