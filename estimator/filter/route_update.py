@@ -26,8 +26,9 @@ def apply_route_match(
 ) -> tuple[F64, F64, MatchRecord]:
     """Update ``filt`` with the accepted match ``rec``; returns the innovation and the
     correction of the position update (E, N) and the record with the heading observation
-    it was applied with. ``route_share``: the part of the gain the route-error states (lane
-    offset, map bias and rotation) take (``extensions.route_errors_overlap_share``)."""
+    it was applied with. ``route_share``: the part of the gain on the cross-track innovation
+    the route-error states (lane offset, map bias and rotation) take
+    (``extensions.route_errors_overlap_share``)."""
     res = pseudo_position_update(
         filt.x,
         filt.P,
@@ -37,6 +38,7 @@ def apply_route_match(
         applied_obs_cov(rec, p),
         rec.normal * float(p.extensions.lane_offset_state),
         route_share,
+        np.asarray(rec.normal, float),
     )
     innovation, correction = res[:2].copy(), res[2:].copy()
     heading = heading_observation(rec, p)

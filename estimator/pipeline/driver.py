@@ -739,13 +739,29 @@ class Driver:
         return None
 
     def _route_share(self, rec: MatchRecord, out: F64, dist: float) -> float:
-        """The part of an accepted match's gain the route-error states take
-        (``extensions.route_errors_overlap_share``): the road its window adds to the previous
-        accepted match's, over its length. The map's bias and rotation are what stays the
-        same match after match; the windows' own cross-track error also stays for as long as
-        they overlap, so taking each window whole would count one error a window length
-        over, as if it were the map's."""
-        if not self.p.extensions.route_errors_overlap_share:
+        """The part of an accepted match's gain on the cross-track innovation that the
+        route-error states take (``extensions.route_errors_overlap_share``): the road its
+        window adds to the previous accepted match's, over its length, where the outage
+        considers a map rotation (variance above zero) without estimating it; else 1.
+
+        A considered rotation turns the map-bias error at the vehicle by its lever arm
+        (:func:`estimator.filter.updates.turn_map_bias`): its variance grows with the square
+        of the distance driven and no match ever shrinks the rotation's part, so the map's
+        bias is a random walk the matches re-learn at every step. Consecutive windows share
+        most of their road and dead-reckoned shape, so their cross-track errors are one error
+        for as long as they overlap; a random walk fed them once a second follows that error
+        (on the long sample's moved map, 6 m across over 7 km). Counted once per window
+        length it does not, while the position keeps the whole gain. Where the rotation is
+        estimated, the bias at the vehicle is the bias at the portal plus one rotation that
+        the trend of the matches refines: sharing its gain only slows that (held-out drives
+        7 and 27). Along the road the overlapping windows' evidence is
+        ``extensions.overlap_inflation``'s."""
+        f = self.filt
+        if not (
+            self.p.extensions.route_errors_overlap_share
+            and f.aux[A_ROT_EST] <= 0
+            and f.P[E_ROT, E_ROT] > 0.0
+        ):
             return 1.0
         previous = self._previous_accepted_dist(out)
         length = rec.window_length_m
