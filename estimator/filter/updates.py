@@ -234,9 +234,7 @@ def _apply_gain(
     # scale-factor error E_GSF is unless C_GSF_EST (extensions.gyro_scale_state)
     gsf_est = cfg[C_GSF_EST] > 0
     if cfg[C_GSF_BLIND] > 0 and not gsf_est and P[E_GSF, E_GSF] > 0.0:
-        _apply_blind_gain(
-            x, P, y, m, PHt, Si, cfg, K, dx, last_considered, rot_est, share, c0, c1
-        )
+        _apply_blind_gain(x, P, y, m, PHt, Si, cfg, K, dx, last_considered, rot_est, share, c0, c1)
         return
     for i in range(NE):
         for a in range(m):
