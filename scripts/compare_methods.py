@@ -97,6 +97,10 @@ BIASED_RUNS = {
         "proposed",
         {"offset.map_turn_honest_prior": True},
     ),
+    "routefuse + `offset.map_turn_honest_prior` + `route_errors_overlap_share`": (
+        "proposed",
+        {"offset.map_turn_honest_prior": True, "extensions.route_errors_overlap_share": True},
+    ),
     "routefuse, `offset.map_bias_turn_prior` off": (
         "proposed",
         {"offset.map_bias_turn_prior": False},

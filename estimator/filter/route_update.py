@@ -21,10 +21,14 @@ UNOBSERVED_VAR = 1e8
 """m^2: the along-track variance a match that does not observe along-track is applied with."""
 
 
-def apply_route_match(filt: Filter, rec: MatchRecord, p: Params) -> tuple[F64, F64, MatchRecord]:
+def apply_route_match(
+    filt: Filter, rec: MatchRecord, p: Params, *, route_share: float = 1.0
+) -> tuple[F64, F64, MatchRecord]:
     """Update ``filt`` with the accepted match ``rec``; returns the innovation and the
     correction of the position update (E, N) and the record with the heading observation
-    it was applied with."""
+    it was applied with. ``route_share``: the part of the gain on the cross-track innovation
+    the route-error states (lane offset, map bias and rotation) take
+    (``extensions.route_errors_overlap_share``)."""
     res = pseudo_position_update(
         filt.x,
         filt.P,
@@ -33,6 +37,8 @@ def apply_route_match(filt: Filter, rec: MatchRecord, p: Params) -> tuple[F64, F
         np.asarray(rec.pseudo_position, float),
         applied_obs_cov(rec, p),
         rec.normal * float(p.extensions.lane_offset_state),
+        route_share,
+        np.asarray(rec.normal, float),
     )
     innovation, correction = res[:2].copy(), res[2:].copy()
     heading = heading_observation(rec, p)

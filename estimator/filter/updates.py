@@ -135,7 +135,7 @@ def apply_update(x: F64, P: F64, y: F64, m: int, PHt: F64, Si: F64, cfg: F64) ->
     the nominal state at once, so it is zero between updates)."""
     K = np.empty((NE, 3))
     dx = np.empty(NE)
-    _apply_gain(x, P, y, m, PHt, Si, cfg, K, dx, NE, False)
+    _apply_gain(x, P, y, m, PHt, Si, cfg, K, dx, NE, False, 1.0, 0.0, 0.0)
 
 
 @kernel
@@ -172,6 +172,44 @@ def _inject_gain(x: F64, y: F64, m: int, cfg: F64, K: F64, dx: F64) -> None:
 
 
 @kernel
+def _share_route_gain(K: F64, m: int, share: float, c0: float, c1: float) -> None:
+    """A partial update of the route-error states (lane offset, map bias, map rotation): the
+    part of their gain that acts on the innovation's component along the unit vector
+    (``c0``, ``c1``), the route's normal, times ``share``
+    (``extensions.route_errors_overlap_share``); the covariance is then updated in Joseph
+    form, so that it stays the covariance of the error this gain makes."""
+    if m != 2:
+        return
+    for i in (E_LANE, E_MAP, E_MAP + 1, E_ROT):
+        c = (1.0 - share) * (K[i, 0] * c0 + K[i, 1] * c1)
+        K[i, 0] -= c * c0
+        K[i, 1] -= c * c1
+
+
+@kernel
+def _joseph(x: F64, P: F64, y: F64, m: int, PHt: F64, Si: F64, cfg: F64, K: F64, dx: F64) -> None:
+    """P <- (I - K H) P (I - K H)^T + K R K^T for any gain K, then x <- x (+) K y."""
+    S = np.empty((3, 3))
+    _inv_small(Si, m, S)
+    KS = np.empty((NE, 3))
+    for i in range(NE):
+        for a in range(m):
+            acc = 0.0
+            for b in range(m):
+                acc += K[i, b] * S[b, a]
+            KS[i, a] = acc
+    for i in range(NE):
+        for j in range(i, NE):
+            acc = 0.0
+            for a in range(m):
+                acc += K[i, a] * PHt[j, a] + PHt[i, a] * K[j, a] - KS[i, a] * K[j, a]
+            v = P[i, j] - acc
+            P[i, j] = v
+            P[j, i] = v
+    _inject_gain(x, y, m, cfg, K, dx)
+
+
+@kernel
 def _apply_gain(
     x: F64,
     P: F64,
@@ -184,6 +222,9 @@ def _apply_gain(
     dx: F64,
     last_considered: int,
     rot_est: bool,
+    share: float,
+    c0: float,
+    c1: float,
 ) -> None:
     # the states from E_LANE up to last_considered (the lane-offset and map-bias errors, but
     # for the map bias where a route pseudo-position estimates it) are considered, not
@@ -193,7 +234,7 @@ def _apply_gain(
     # scale-factor error E_GSF is unless C_GSF_EST (extensions.gyro_scale_state)
     gsf_est = cfg[C_GSF_EST] > 0
     if cfg[C_GSF_BLIND] > 0 and not gsf_est and P[E_GSF, E_GSF] > 0.0:
-        _apply_blind_gain(x, P, y, m, PHt, Si, cfg, K, dx, last_considered, rot_est)
+        _apply_blind_gain(x, P, y, m, PHt, Si, cfg, K, dx, last_considered, rot_est, share, c0, c1)
         return
     for i in range(NE):
         for a in range(m):
@@ -202,6 +243,10 @@ def _apply_gain(
                 acc += PHt[i, b] * Si[b, a]
             K[i, a] = acc  # K = P H^T S^-1
     _zero_considered_gain(K, m, last_considered, rot_est, gsf_est)
+    if share != 1.0:
+        _share_route_gain(K, m, share, c0, c1)
+        _joseph(x, P, y, m, PHt, Si, cfg, K, dx)
+        return
     for i in range(NE):
         considered = _considered(i, last_considered, rot_est, gsf_est)
         for j in range(i, NE):
@@ -230,6 +275,9 @@ def _apply_blind_gain(
     dx: F64,
     last_considered: int,
     rot_est: bool,
+    share: float,
+    c0: float,
+    c1: float,
 ) -> None:
     """:func:`_apply_gain` with the gain of the filter that does not know the considered z gyro
     scale factor (``extensions.gyro_scale_blind_gain``), and the covariance updated for that
@@ -264,6 +312,8 @@ def _apply_blind_gain(
                 acc += (PHt[i, b] - ci * h[b]) * Si0[b, a]
             K[i, a] = acc  # K = P0 H^T (H P0 H^T + R)^-1
     _zero_considered_gain(K, m, last_considered, rot_est, gsf_est)
+    if share != 1.0:
+        _share_route_gain(K, m, share, c0, c1)
     KS = np.empty((NE, 3))
     for i in range(NE):
         for a in range(m):
@@ -418,6 +468,8 @@ def pseudo_position_update(
     z: F64,
     R2: F64,
     normal: F64,
+    share: float,
+    cross: F64,
 ) -> F64:
     """The route pseudo-observation of E, N position with covariance ``R2``. Returns
     [innovation E, N, correction E, N]. Also asks the next GNSS fix to widen the position
@@ -425,7 +477,9 @@ def pseudo_position_update(
 
     The truth is ``z + normal * (lane-offset error) - (map-bias error) + noise`` (``normal``:
     the route's left normal at the match; zero leaves the lane-offset error out; the map-bias
-    error is zero unless :func:`clone_route_errors` gave it a covariance)."""
+    error is zero unless :func:`clone_route_errors` gave it a covariance). ``share``: the
+    route-error states' part of the gain on the innovation across ``cross`` (the route's unit
+    normal; 1: all of it, see :func:`_share_route_gain`)."""
     flush_covariance(P, aux, cfg)
     H = np.zeros((3, NE))
     R = np.zeros((3, 3))
@@ -447,7 +501,7 @@ def pseudo_position_update(
     estimate = aux[A_ROUTE_EST] > 0
     rot_est = aux[A_ROT_EST] > 0
     last = E_LANE if estimate else NE
-    _apply_gain(x, P, y, 2, PHt, Si, cfg, K, dx, last, rot_est)
+    _apply_gain(x, P, y, 2, PHt, Si, cfg, K, dx, last, rot_est, share, cross[0], cross[1])
     if estimate:
         for k in range(3):
             aux[A_ROUTE + k] += dx[E_LANE + k]

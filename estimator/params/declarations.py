@@ -587,6 +587,18 @@ class ExtensionParams:
         "along-track variance is multiplied by the window length over the distance since the "
         "previous accepted match",
     )
+    route_errors_overlap_share: bool = param(
+        False,
+        "where an outage considers the map's rotation without estimating it, the estimated "
+        "route errors (lane offset, map bias) take an accepted match's cross-track evidence in "
+        "proportion to the road its window adds to the previous accepted match's (the "
+        "distance since over the window length, at most 1; a partial update, the covariance in "
+        "Joseph form); the position keeps the whole gain. The considered rotation regrows the "
+        "map bias's variance with the distance driven, so it is re-learned match by match, and "
+        "consecutive windows share most of their road and dead-reckoned shape: counted each "
+        "second, their one cross-track error walks the map bias, and the pseudo-positions "
+        "taken from the map it moves walk along",
+    )
     weak_along_track: bool = param(
         True,
         "a match whose along-track sigma is larger than the filter's own along-track sigma and "

@@ -729,6 +729,46 @@ class Driver:
             return rec
         return self._overlap(rec, out, float(aux[A_DIST]))
 
+    def _previous_accepted_dist(self, out: F64) -> float | None:
+        """Travelled distance at this outage's previous accepted match (None: none yet)."""
+        for r in reversed(self.records):
+            if r.t < self.track.t_start:
+                break
+            if r.accepted:
+                return float(out[r.epoch, O_DIST])
+        return None
+
+    def _route_share(self, rec: MatchRecord, out: F64, dist: float) -> float:
+        """The part of an accepted match's gain on the cross-track innovation that the
+        route-error states take (``extensions.route_errors_overlap_share``): the road its
+        window adds to the previous accepted match's, over its length, where the outage
+        considers a map rotation (variance above zero) without estimating it; else 1.
+
+        A considered rotation turns the map-bias error at the vehicle by its lever arm
+        (:func:`estimator.filter.updates.turn_map_bias`): its variance grows with the square
+        of the distance driven and no match ever shrinks the rotation's part, so the map's
+        bias is a random walk the matches re-learn at every step. Consecutive windows share
+        most of their road and dead-reckoned shape, so their cross-track errors are one error
+        for as long as they overlap; a random walk fed them once a second follows that error
+        (on the long sample's moved map, 6 m across over 7 km). Counted once per window
+        length it does not, while the position keeps the whole gain. Where the rotation is
+        estimated, the bias at the vehicle is the bias at the portal plus one rotation that
+        the trend of the matches refines: sharing its gain only slows that (held-out drives
+        7 and 27). Along the road the overlapping windows' evidence is
+        ``extensions.overlap_inflation``'s."""
+        f = self.filt
+        if not (
+            self.p.extensions.route_errors_overlap_share
+            and f.aux[A_ROT_EST] <= 0
+            and f.P[E_ROT, E_ROT] > 0.0
+        ):
+            return 1.0
+        previous = self._previous_accepted_dist(out)
+        length = rec.window_length_m
+        if previous is None or not length > 0.0:
+            return 1.0
+        return min(1.0, max(dist - previous, self.p.window.spacing_m) / length)
+
     def _overlap(self, rec: MatchRecord, out: F64, dist: float) -> MatchRecord:
         """Consecutive windows share most of their track: one attempt a second with a 250 m
         window at 15 m/s re-measures 235 m of the previous one's road and DR shape, so their
@@ -736,13 +776,7 @@ class Driver:
         variance is multiplied by the window length over the distance since the previous
         accepted match (at least 1), so a stretch of road counts once however often it is
         matched."""
-        previous = None
-        for r in reversed(self.records):
-            if r.t < self.track.t_start:
-                break
-            if r.accepted:
-                previous = float(out[r.epoch, O_DIST])
-                break
+        previous = self._previous_accepted_dist(out)
         if previous is None:
             return rec
         factor = rec.window_length_m / max(dist - previous, self.p.window.spacing_m)
@@ -936,7 +970,8 @@ class Driver:
                 rec = dataclasses.replace(rec, accepted=False, gates=(*rec.gates, gate))
         innovation, correction = rec.innovation, np.zeros(2)
         if rec.accepted:
-            innovation, correction, rec = apply_route_match(f, rec, self.p)
+            share = self._route_share(rec, f.out, float(f.aux[A_DIST]))
+            innovation, correction, rec = apply_route_match(f, rec, self.p, route_share=share)
             if twin is not None and rec.reanchored:
                 # the filter's covariance was found not to cover its drift: dead reckoning
                 # starts afresh from the re-anchored state

@@ -201,6 +201,7 @@ MATCHING_EXTENSIONS = (
     "map_turn_two_places_applied",
     "map_turn_honest_consider",
     "map_turn_release",
+    "route_errors_overlap_share",
     "geometry_covariance",
     "weak_along_track",
     "reanchor",

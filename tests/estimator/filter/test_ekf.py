@@ -120,7 +120,7 @@ def test_pseudo_position_update_is_the_kalman_update(normal):
     considered = P[layout.E_LANE :, layout.E_LANE :].copy()
     aux = np.zeros(layout.NA)
     x0 = x.copy()
-    res = updates.pseudo_position_update(x, P, aux, cfg, z, R, n)
+    res = updates.pseudo_position_update(x, P, aux, cfg, z, R, n, 1.0, np.zeros(2))
     np.testing.assert_allclose(res[:2], y)
     np.testing.assert_allclose(res[2:], dx[6:8], rtol=1e-12)
     np.testing.assert_allclose(x[:3] - x0[:3], dx[6:9], rtol=1e-12)
@@ -155,7 +155,7 @@ def test_a_pseudo_position_estimates_the_route_errors_when_the_bias_is_applied()
     aux = np.zeros(layout.NA)
     aux[layout.A_ROUTE_EST] = 1.0
     aux[layout.A_ROUTE : layout.A_ROUTE + 3] = [0.5, 1.0, -1.0]
-    updates.pseudo_position_update(x, P, aux, cfg, z, R, n)
+    updates.pseudo_position_update(x, P, aux, cfg, z, R, n, 1.0, np.zeros(2))
     np.testing.assert_allclose(P, P_exp, rtol=1e-10, atol=1e-12)
     np.testing.assert_allclose(
         aux[layout.A_ROUTE : layout.A_ROUTE + 3],
@@ -166,7 +166,7 @@ def test_a_pseudo_position_estimates_the_route_errors_when_the_bias_is_applied()
     P2 = _random_cov(rng) * 0.1
     aux2 = np.zeros(layout.NA)
     considered = P2[layout.E_LANE :, layout.E_LANE :].copy()
-    updates.pseudo_position_update(x.copy(), P2, aux2, cfg, z, R, n)
+    updates.pseudo_position_update(x.copy(), P2, aux2, cfg, z, R, n, 1.0, np.zeros(2))
     np.testing.assert_array_equal(P2[layout.E_LANE :, layout.E_LANE :], considered)
     np.testing.assert_array_equal(aux2[layout.A_ROUTE : layout.A_ROUTE + 3], 0.0)
 

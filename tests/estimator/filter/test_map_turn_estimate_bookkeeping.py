@@ -60,7 +60,7 @@ def test_summed_rotation_corrections_are_the_field_they_add_up_to() -> None:
         aux[A_MAP_AT : A_MAP_AT + 2] = at
         before = aux.copy()
         z = x[X_POS : X_POS + 2] + rng.normal(scale=3.0, size=2)
-        pseudo_position_update(x, P, aux, cfg, z, np.eye(2), np.array([0.0, 1.0]))
+        pseudo_position_update(x, P, aux, cfg, z, np.eye(2), np.array([0.0, 1.0]), 1.0, np.zeros(2))
         dm = aux[A_ROUTE + 1 : A_ROUTE + 3] - before[A_ROUTE + 1 : A_ROUTE + 3]
         dr = aux[A_ROT] - before[A_ROT]
         assert dr != 0.0  # the rotation error has a gain
@@ -84,9 +84,9 @@ def test_without_the_switch_the_rotation_error_stays_considered() -> None:
     x[X_POS : X_POS + 2] = [300.0, 40.0]
     aux[A_MAP_AT : A_MAP_AT + 2] = [300.0, 40.0]
     z = np.array([302.0, 37.0])
-    pseudo_position_update(x, P, aux, cfg, z, np.eye(2), np.array([0.0, 1.0]))
+    pseudo_position_update(x, P, aux, cfg, z, np.eye(2), np.array([0.0, 1.0]), 1.0, np.zeros(2))
     assert aux[A_ROT] == 0.0 and not np.any(aux[A_ROT_SHIFT : A_ROT_SHIFT + 2])
     assert P[E_ROT, E_ROT] == rot_row[E_ROT]
     P2, x2, aux2, cfg2 = _setup(True, 2)
-    pseudo_position_update(x2, P2, aux2, cfg2, z, np.eye(2), np.array([0.0, 1.0]))
+    pseudo_position_update(x2, P2, aux2, cfg2, z, np.eye(2), np.array([0.0, 1.0]), 1.0, np.zeros(2))
     assert P2[E_ROT, E_ROT] < rot_row[E_ROT]
