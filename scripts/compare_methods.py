@@ -93,13 +93,13 @@ BIASED_RUNS = {
     "routefuse, `map_bias` off": ("proposed", {"extensions.map_bias": False}),
     "routefuse, `offset.map_bias_refine` off": ("proposed", {"offset.map_bias_refine": False}),
     "routefuse, `map_turn_estimate` off": ("proposed", {"extensions.map_turn_estimate": False}),
-    "routefuse + `offset.map_turn_honest_prior`": (
+    "routefuse, `route_errors_overlap_share` off": (
         "proposed",
-        {"offset.map_turn_honest_prior": True},
+        {"extensions.route_errors_overlap_share": False},
     ),
-    "routefuse + `offset.map_turn_honest_prior` + `route_errors_overlap_share`": (
+    "routefuse, `offset.map_turn_honest_prior` and `route_errors_overlap_share` off": (
         "proposed",
-        {"offset.map_turn_honest_prior": True, "extensions.route_errors_overlap_share": True},
+        {"offset.map_turn_honest_prior": False, "extensions.route_errors_overlap_share": False},
     ),
     "routefuse, `offset.map_bias_turn_prior` off": (
         "proposed",

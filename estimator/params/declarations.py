@@ -475,7 +475,7 @@ class OffsetParams:
         "lane and rotation take the rest",
     )
     map_turn_honest_prior: bool = param(
-        False,
+        True,
         "with extensions.map_turn_estimate, an applied bias whose fitted rotation is not "
         "applied starts the outage's rotation error from its honest second moment (the "
         "rotation's square plus its variance) instead of the method of moments (its square "
@@ -588,7 +588,7 @@ class ExtensionParams:
         "previous accepted match",
     )
     route_errors_overlap_share: bool = param(
-        False,
+        True,
         "where an outage considers the map's rotation without estimating it, the estimated "
         "route errors (lane offset, map bias) take an accepted match's cross-track evidence in "
         "proportion to the road its window adds to the previous accepted match's (the "

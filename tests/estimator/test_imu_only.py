@@ -59,7 +59,10 @@ def test_the_caution_is_only_for_logs_without_wheel_speed() -> None:
     assert ext.calibrated_approach and not p.extensions.calibrated_approach
     assert ext.along_drift_evidence and not p.extensions.along_drift_evidence
     assert ext.search_correction_cap and not p.extensions.search_correction_cap
-    assert not p.offset.map_turn_honest_prior
+    # the honest prior is the default since session 13; the caution keeps it on without wheels
+    moments = with_values(p, {"offset.map_turn_honest_prior": False})
+    assert matching_params(moments, have_wheel=False).offset.map_turn_honest_prior
+    assert matching_params(moments, have_wheel=True) is moments
     off = with_values(p, {"extensions.no_wheel_caution": False})
     assert matching_params(off, have_wheel=False) is off
     paper = for_method(p, "paper")

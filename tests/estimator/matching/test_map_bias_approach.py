@@ -12,6 +12,7 @@ from estimator.matching import map_bias as mb
 from estimator.params import Params, with_values
 from estimator.route import Route
 from estimator.sim.sensors import gauss_markov
+from tests._session11_fit import MOMENTS_PRIOR
 
 LANE = -1.75
 SPEED = 16.0
@@ -97,7 +98,7 @@ def test_a_rotation_within_its_noise_is_not_considered_beyond_the_lower_bound() 
 
 
 def test_the_learned_bias_of_a_right_map_considers_no_rotation_within_two_sigmas() -> None:
-    base = {"extensions.map_bias": True, "offset.map_bias_track_m": 1600.0}
+    base = {"extensions.map_bias": True, "offset.map_bias_track_m": 1600.0, **MOMENTS_PRIOR}
     moments = with_values(Params(), {**base, "offset.map_turn_lower_sigmas": 0.0})
     lower = with_values(Params(), {**base, "offset.map_turn_lower_sigmas": 2.0})
     considered = {"moments": 0, "lower": 0}

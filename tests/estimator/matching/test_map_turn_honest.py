@@ -13,13 +13,18 @@ from estimator.matching.map_bias import MapBias, carried_bias, learn_map_bias
 from estimator.params import Params, with_values
 from estimator.pipeline.driver import honest_turn_consider
 from estimator.route import Route
+from tests._session11_fit import MOMENTS_PRIOR
 
 HONEST = with_values(
-    Params(), {"extensions.map_bias": True, "extensions.map_turn_honest_consider": True}
+    Params(),
+    {"extensions.map_bias": True, "extensions.map_turn_honest_consider": True, **MOMENTS_PRIOR},
 )
 MOMENTS = with_values(
-    Params(), {"extensions.map_bias": True, "extensions.map_turn_honest_consider": False}
+    Params(),
+    {"extensions.map_bias": True, "extensions.map_turn_honest_consider": False, **MOMENTS_PRIOR},
 )
+"""both with the outage's prior for an unapplied rotation as it was before session 13 (the
+method of moments): the honest consider is what these tests compare with it"""
 LANE = -1.75
 
 
