@@ -1,8 +1,9 @@
 """Session 11's map-bias fit (the 800 m approach, the method of moments for an unapplied
-rotation) and session 12's prior for an unapplied rotation, for tests of mechanisms that today's fit (the 1600 m approach, an unapplied
-rotation considered beyond two of its sigmas) no longer exercises on their corpus drive:
-drive 5's matches pulling the estimate away from dead reckoning (undone by
-``dr_separation``), drive 10's first tunnel undone on the road as driven, and the like."""
+rotation) and session 12's prior for an unapplied rotation, for tests of mechanisms that
+today's fit (the 1600 m approach, an unapplied rotation estimated from its honest second
+moment) no longer exercises on their corpus drive: drive 5's matches pulling the estimate away
+from dead reckoning (undone by ``dr_separation``), drive 10's first tunnel undone on the road
+as driven, and the like."""
 
 from __future__ import annotations
 
