@@ -314,22 +314,7 @@ def _apply_blind_gain(
     _zero_considered_gain(K, m, last_considered, rot_est, gsf_est)
     if share != 1.0:
         _share_route_gain(K, m, share, c0, c1)
-    KS = np.empty((NE, 3))
-    for i in range(NE):
-        for a in range(m):
-            acc = 0.0
-            for b in range(m):
-                acc += K[i, b] * S[b, a]
-            KS[i, a] = acc
-    for i in range(NE):
-        for j in range(i, NE):
-            acc = 0.0
-            for a in range(m):
-                acc += K[i, a] * PHt[j, a] + PHt[i, a] * K[j, a] - KS[i, a] * K[j, a]
-            v = P[i, j] - acc  # P <- (I - K H) P (I - K H)^T + K R K^T
-            P[i, j] = v
-            P[j, i] = v
-    _inject_gain(x, y, m, cfg, K, dx)
+    _joseph(x, P, y, m, PHt, Si, cfg, K, dx)
 
 
 @kernel
