@@ -48,6 +48,9 @@ class DeviationPlot:
     """GNSS-degraded intervals, s after start"""
     truth: tuple[F64, F64] | None = None
     """(baseline, proposed) horizontal error against truth, m (NaN where truth is missing)"""
+    sigma: F64 | None = None
+    """the proposed run's horizontal 1-sigma, m, drawn beside its error against truth: an
+    error far above it is a filter that claims to know more than it does"""
 
     @classmethod
     def build(cls, inputs: Any, baseline: Run, proposed: Run) -> DeviationPlot:
@@ -68,12 +71,14 @@ class DeviationPlot:
             if series.truth is not None and len(series.truth.t) > 1:
                 err.append(_resample(series.truth.t - t0, series.truth.h_err_m, grid, gaps=True))
         truth = (err[0], err[1]) if len(err) == 2 else None
+        sigma = np.hypot(proposed.epochs.position_sigma[:, 0], proposed.epochs.position_sigma[:, 1])
         return cls(
             t=grid,
             position=(pos[0], pos[1]),
             heading=(hdg[0], hdg[1]),
             outages=outages,
             truth=truth,
+            sigma=None if truth is None else _resample(tp, sigma, grid),
         )
 
     @property
@@ -107,8 +112,22 @@ class DeviationPlot:
             "heading": "heading deviation from the route",
             "truth": "horizontal error against ground truth",
         }[which]
+        data: tuple[F64, ...] = (xs, yb, yp, shade, now)
+        extra: tuple[dict[str, Any], ...] = ()
+        if which == "truth" and self.sigma is not None:
+            ys = np.insert(self.sigma, k, [np.interp(t_now, t, self.sigma)] * 3)
+            data += (ys,)
+            extra = (
+                {
+                    "label": "proposed 1-sigma [m]",
+                    "stroke": PROPOSED_COLOR,
+                    "width": 1,
+                    "dash": [4, 4],
+                    "points": {"show": False},
+                },
+            )
         return {
-            "data": (xs, yb, yp, shade, now),
+            "data": data,
             "series": (
                 {"label": "t [s]"},
                 {"label": f"baseline [{unit}]", "stroke": BASELINE_COLOR, "width": 1.5},
@@ -128,6 +147,7 @@ class DeviationPlot:
                     "width": 1.5,
                     "points": {"show": False},
                 },
+                *extra,
             ),
             "scales": {"x": {"time": False}, "band": {"auto": False, "range": (0.0, 1.0)}},
             "title": title,
