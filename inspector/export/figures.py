@@ -103,18 +103,23 @@ def replay_strip(
     plot: DeviationPlot, refused_t: F64, method: str = "proposed", *, width_in: float = 4.6
 ) -> TimeStrip:
     """The error against truth (when the log has it) and the route deviation of both runs
-    against time since the log start, outages shaded, refused attempts ticked: the replay page's
-    deviation plot. The route deviation is never shown alone where truth exists (it rewards
-    following a wrong map)."""
-    panels = [("route deviation [m]", plot.position)]
+    against time since the log start, outages shaded, refused attempts ticked, and the compared
+    run's own horizontal 1-sigma dashed beside its error: the replay page's deviation plot. The
+    route deviation is never shown alone where truth exists (it rewards following a wrong
+    map)."""
+    panels: list[tuple[str, tuple[F64, F64], F64 | None]] = [
+        ("route deviation [m]", plot.position, None)
+    ]
     if plot.truth is not None:
-        panels.insert(0, ("error vs truth [m]", plot.truth))
+        panels.insert(0, ("error vs truth [m]", plot.truth, plot.sigma))
     fig = Figure(figsize=(width_in, 1.0 + 1.15 * len(panels)), dpi=100, layout="constrained")
     axes = fig.subplots(len(panels), 1, sharex=True, squeeze=False)[:, 0]
-    for ax, (label, (base, comp)) in zip(axes, panels, strict=True):
+    for ax, (label, (base, comp), sigma) in zip(axes, panels, strict=True):
         _shade(ax, plot.outages)
         ax.plot(plot.t, base, color=BASELINE_COLOR, lw=1.0, label="baseline")
         ax.plot(plot.t, comp, color=PROPOSED_COLOR, lw=1.0, label=method)
+        if sigma is not None:
+            ax.plot(plot.t, sigma, color=PROPOSED_COLOR, lw=0.8, ls="--", label="1-sigma")
         ax.set_ylabel(label, fontsize="small")
         ax.set_ylim(bottom=0.0)
         ax.tick_params(labelsize="x-small")
