@@ -169,18 +169,16 @@ def gate_table(
             alternative_gate(rival, values, rival_cost, validation.cost, g)
             for rival, values, rival_cost in validation.rivals
         ]
-    table.append(correction_cap(correction_m, g, params, search_m))
+    table.append(correction_cap(correction_m, params, search_m))
     return tuple(table)
 
 
-def correction_cap(
-    correction_m: float, g: GateParams, params: Params, search_m: float
-) -> GateDecision:
+def correction_cap(correction_m: float, params: Params, search_m: float) -> GateDecision:
     """``gates.max_correction_m``, or with ``extensions.search_correction_cap`` and
     ``covariance_search`` the along-track search's half-width where that is wider: the search
     was widened to 3 sigma of the filter's own along-track position because the filter may be
     that far off, so a correction that far is what it was looking for, not a blunder."""
-    ext = params.extensions
+    ext, g = params.extensions, params.gates
     if not (ext.search_correction_cap and ext.covariance_search) or search_m <= g.max_correction_m:
         return CORRECTION_CAP.decide(correction_m, g)
     return CORRECTION_CAP.decide(

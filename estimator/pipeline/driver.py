@@ -729,13 +729,15 @@ class Driver:
             return rec
         return self._overlap(rec, out, float(aux[A_DIST]))
 
-    def _previous_accepted_dist(self, out: F64) -> float | None:
-        """Travelled distance at this outage's previous accepted match (None: none yet)."""
+    def _new_road_m(self, out: F64, dist: float) -> float | None:
+        """The road driven since this outage's previous accepted match (at least
+        ``window.spacing_m``; None: none yet), at travelled distance ``dist``: what a window
+        adds to the previous accepted one's."""
         for r in reversed(self.records):
             if r.t < self.track.t_start:
                 break
             if r.accepted:
-                return float(out[r.epoch, O_DIST])
+                return max(dist - float(out[r.epoch, O_DIST]), self.p.window.spacing_m)
         return None
 
     def _route_share(self, rec: MatchRecord, out: F64, dist: float) -> float:
@@ -763,11 +765,11 @@ class Driver:
             and f.P[E_ROT, E_ROT] > 0.0
         ):
             return 1.0
-        previous = self._previous_accepted_dist(out)
+        new_road = self._new_road_m(out, dist)
         length = rec.window_length_m
-        if previous is None or not length > 0.0:
+        if new_road is None or not length > 0.0:
             return 1.0
-        return min(1.0, max(dist - previous, self.p.window.spacing_m) / length)
+        return min(1.0, new_road / length)
 
     def _overlap(self, rec: MatchRecord, out: F64, dist: float) -> MatchRecord:
         """Consecutive windows share most of their track: one attempt a second with a 250 m
@@ -776,10 +778,10 @@ class Driver:
         variance is multiplied by the window length over the distance since the previous
         accepted match (at least 1), so a stretch of road counts once however often it is
         matched."""
-        previous = self._previous_accepted_dist(out)
-        if previous is None:
+        new_road = self._new_road_m(out, dist)
+        if new_road is None:
             return rec
-        factor = rec.window_length_m / max(dist - previous, self.p.window.spacing_m)
+        factor = rec.window_length_m / new_road
         if factor <= 1.0 or rec.fit is None:
             return rec
         n = rec.fit.normal
