@@ -56,6 +56,7 @@ from estimator.filter.layout import (
     STATUS_FULL,
     X_POS,
     X_QUAT,
+    X_SCALE,
     X_VEL,
 )
 from estimator.filter.mechanisation import mechanise
@@ -75,6 +76,10 @@ wherever the vehicle went meanwhile."""
 GAP_VEL_VAR = 5.0**2
 GAP_YAW_VAR = (math.pi / 4) ** 2
 """Velocity and yaw variance added across a logging gap: the vehicle may have turned."""
+GAP_TILT_VAR = math.radians(3.0) ** 2
+"""Roll and pitch variance added across a logging gap: the road's grade and bank change (3 deg
+is a 5 % grade). Held at the sigma before the gap, a grade the gap hides leaks gravity into the
+forward acceleration (0.17 m/s^2 a degree), which the wheel-speed row then reads as heading."""
 ZUPT_MAX_SPEED = 1.0
 """m/s: a stop is only believed when the filter has slowed down to it (a vehicle cruising on a
 smooth road at constant speed looks as still to the IMU as a parked one)."""
@@ -219,6 +224,8 @@ def _interval(P: F64, aux: F64, t: float) -> float:
         aux[A_INFLATE] = 1.0
         for i in range(3):
             P[E_VEL + i, E_VEL + i] += GAP_VEL_VAR
+        P[E_ATT, E_ATT] += GAP_TILT_VAR
+        P[E_ATT + 1, E_ATT + 1] += GAP_TILT_VAR
         P[E_ATT + 2, E_ATT + 2] += GAP_YAW_VAR
     return dt
 
@@ -226,9 +233,10 @@ def _interval(P: F64, aux: F64, t: float) -> float:
 @kernel
 def _bridge(x: F64, P: F64, aux: F64, t: float, wheel_t: F64, wheel_v: F64) -> None:
     """Across an IMU gap the wheels still measured how far the vehicle went: move the position
-    that distance along the last horizontal velocity's direction (and the DR track with it),
-    set the speed to the wheels' at the gap's end, and add to the position variance what a
-    road turning anywhere in the gap could put it off, half the distance each way. On a log
+    that distance (times the wheel scale the filter estimated) along the last horizontal
+    velocity's direction (and the DR track with it), set the speed to the wheels' at the gap's
+    end, and add to the position variance what a road turning anywhere in the gap could put it
+    off, half the distance each way. On a log
     without wheel speed the last velocity carries it instead, and the variance adds the
     speed's own uncertainty over the gap (:data:`GAP_VEL_VAR`): held, the position would stay
     behind by the whole gap's travel while claiming the sigma it had before it. Where the
@@ -245,6 +253,9 @@ def _bridge(x: F64, P: F64, aux: F64, t: float, wheel_t: F64, wheel_v: F64) -> N
             return
         dist, v_end = speed * (t - t0), speed
         var = GAP_VEL_VAR * (t - t0) ** 2
+    else:
+        dist *= x[X_SCALE]
+        v_end *= x[X_SCALE]
     ue, un = x[X_VEL] / speed, x[X_VEL + 1] / speed
     x[X_POS] += ue * dist
     x[X_POS + 1] += un * dist

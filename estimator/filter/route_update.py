@@ -11,6 +11,8 @@ import numpy as np
 from numpy.typing import NDArray
 
 from estimator.filter.engine import Filter
+from estimator.filter.layout import E_ATT, E_VEL, X_QUAT, X_VEL
+from estimator.filter.quaternion import qmul, set_quat
 from estimator.filter.updates import heading_update, pseudo_position_update
 from estimator.params import Params
 from estimator.results import HeadingObservation, MatchRecord
@@ -78,14 +80,37 @@ def heading_observation(rec: MatchRecord, p: Params) -> tuple[float, float] | No
     window's length with the registration residual as point noise (sqrt(12 / N) / L), floored
     at 0.1 deg; the window's own heading drift is part of the residual. A re-anchor after an
     IMU gap (``extensions.gap_reacquire``) always observes the heading: the gap's turn is what it
-    corrects."""
-    observed = p.extensions.heading_observation or "gap_end_s" in rec.extra
+    corrects, turned exactly before the update (:func:`turn_about_up`), which then only narrows
+    the heading's variance to the fit's."""
+    after_gap = "gap_end_s" in rec.extra
+    observed = p.extensions.heading_observation or after_gap
     if not (observed and rec.accepted and rec.n_pairs >= 3):
         return None
-    dyaw = float(rec.rotation_rad)
+    # a re-anchor after an IMU gap has turned the heading by the rotation already
+    dyaw = 0.0 if after_gap else float(rec.rotation_rad)
     length = (rec.n_pairs - 1) * p.window.spacing_m
     if not (math.isfinite(dyaw) and length > 0):
         return None
     noise = max(float(rec.residual_m), 0.5) if math.isfinite(rec.residual_m) else 0.5
     sigma = max(noise * math.sqrt(12.0 / rec.n_pairs) / length, math.radians(0.1))
     return dyaw, sigma
+
+
+def turn_about_up(x: F64, P: F64, angle: float) -> None:
+    """Turn the navigation state by ``angle`` (rad) about the local vertical: the attitude and
+    the velocity exactly, and their errors' covariance by the same rotation (the attitude error
+    is a rotation of the ENU frame, so it turns with it). A heading error of tens of degrees
+    (a road's turn inside an IMU gap) corrected through the linear gain would turn the velocity
+    by its tangent instead of the angle and stretch it (by 41 % at 45 deg); the body-velocity
+    updates after it then split that mismatch between heading and velocity and walk the heading
+    off by degrees a second."""
+    c, s = math.cos(angle), math.sin(angle)
+    h = 0.5 * angle
+    q = x[X_QUAT : X_QUAT + 4]
+    set_quat(x, *qmul(math.cos(h), 0.0, 0.0, math.sin(h), q[0], q[1], q[2], q[3]))
+    ve, vn = float(x[X_VEL]), float(x[X_VEL + 1])
+    x[X_VEL], x[X_VEL + 1] = c * ve - s * vn, s * ve + c * vn
+    turn = np.eye(P.shape[0])
+    for block in (E_ATT, E_VEL):
+        turn[block : block + 2, block : block + 2] = [[c, -s], [s, c]]
+    P[:] = turn @ P @ turn.T

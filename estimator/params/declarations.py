@@ -276,6 +276,16 @@ class PseudoObsParams:
         hi=20,
         step=0.05,
     )
+    gap_bridge_heading_sigma_deg: float = param(
+        1.0,
+        "1-sigma of the road's heading as the vehicle's after an IMU gap bridged along the route "
+        "(extensions.gap_route_bridge): the map's polyline against the curve, and the vehicle's "
+        "own angle to its lane; the map's rotation uncertainty is added to it",
+        unit="deg",
+        lo=0.05,
+        hi=20,
+        step=0.05,
+    )
     weak_along_disagreement: float = param(
         5.0,
         "extensions.weak_along_track refuses a fit's along-track only when it also disagrees "
@@ -620,6 +630,13 @@ class ExtensionParams:
         "re-anchor to the route (as extensions.reanchor) once gates.reanchor_after consecutive "
         "windows wholly after the gap fit it turned by at most 45 deg and placed within what the "
         "gap explains, refused only for disagreeing with the filter's heading and place",
+    )
+    gap_route_bridge: bool = param(
+        True,
+        "after an IMU gap in an outage, where the route placed the vehicle up to a window "
+        "before it, place it where the wheels' distance along the route puts it and turn its "
+        "heading to the road's there (pseudo.gap_bridge_heading_sigma_deg): the gap carried "
+        "it straight along the old heading, off the road wherever the road turned inside it",
     )
     curvature_covariance: bool = param(
         False,

@@ -47,6 +47,7 @@ from estimator.filter.layout import (
     E_MAP,
     E_POS,
     E_ROT,
+    E_SCALE,
     E_VEL,
     I_IMU,
     O_DIST,
@@ -57,11 +58,12 @@ from estimator.filter.layout import (
     O_T,
     O_VEL,
     X_POS,
+    X_QUAT,
     X_VEL,
 )
 from estimator.filter.portal import advance_to_outage
 from estimator.filter.propagation import flush_covariance
-from estimator.filter.route_update import applied_obs_cov, apply_route_match
+from estimator.filter.route_update import applied_obs_cov, apply_route_match, turn_about_up
 from estimator.filter.setup import FilterInputs, prepare_inputs, route_errors_estimated
 from estimator.filter.twin import DeadReckoningTwin, Undone
 from estimator.filter.updates import (
@@ -69,6 +71,8 @@ from estimator.filter.updates import (
     clone_map_turn,
     clone_route_errors,
     grow_map_bias,
+    heading_update,
+    pseudo_position_update,
     turn_map_bias,
 )
 from estimator.log import Log
@@ -94,6 +98,7 @@ from estimator.matching.map_bias import (
 )
 from estimator.matching.reanchor import gap_bound_m, should_reanchor, within_drift
 from estimator.nav.frames import LocalFrame
+from estimator.nav.rotation import yaw_from_quaternion
 from estimator.params import Method, Params, for_method, matching_params
 from estimator.pipeline.reuse import (
     Checkpoint,
@@ -182,6 +187,7 @@ def run(
         + gnss_acceptance_warnings(log, epochs, inputs.degraded)
         + separation_warnings(driver.records, log.t_start, p)
         + reacquire_warnings(driver.records, log.t_start)
+        + gap_bridge_warnings(driver.records, log.t_start)
         + approach_warnings(driver.checkpoints, driver.inp.degraded, log.t_start, p)
         + unplaced_along_warnings(epochs, driver.records, inputs.degraded, log.t_start),
         _reuse=state,
@@ -253,6 +259,18 @@ def reacquire_warnings(records: Sequence[MatchRecord], t_start: float) -> tuple[
             f"that the wheels could not see; heading and position re-anchored there{again}"
         )
     return tuple(lines)
+
+
+def gap_bridge_warnings(records: Sequence[MatchRecord], t_start: float) -> tuple[str, ...]:
+    """One line per IMU gap bridged along the route (``extensions.gap_route_bridge``)."""
+    return tuple(
+        f"IMU gap that ended at {r.extra['gap_bridge_end_s']:.1f} s bridged along the route at "
+        f"{r.t - t_start:.1f} s: the wheels' {r.extra['gap_bridge_along_m']:.0f} m along the road "
+        f"moved the position {r.extra['gap_bridge_moved_m']:.1f} m from the straight line the gap "
+        f"left it on and turned its heading {r.extra['gap_bridge_turn_deg']:+.1f} deg to the road's"
+        for r in records
+        if "gap_bridge_end_s" in r.extra
+    )
 
 
 def approach_warnings(
@@ -350,6 +368,8 @@ class _Track:
     """the offset and rotation ``biased_route`` was moved back by"""
     pivot_dist: float = 0.0
     """distance travelled at the end of the track the bias was learned from"""
+    bridged_gap_end: float = -math.inf
+    """the end of the last IMU gap :meth:`Driver._bridged_on_route` looked at"""
 
 
 class Driver:
@@ -705,20 +725,17 @@ class Driver:
         return track
 
     def _window(self, out: F64, n_out: int, x: F64, aux: F64, length_m: float) -> F64:
-        """The DR track over the last ``length_m`` of travel, integrated from the mechanised
-        velocity only (no correction jumps), translated to end at the estimate."""
-        dist = out[:n_out, O_DIST]
-        d_now = float(aux[A_DIST])
-        i0 = max(search_right(dist, d_now - length_m) - 1, 0)
-        window: F64 = track_window(
-            out[:n_out, O_DR : O_DR + 2],
-            dist,
-            aux[A_DR : A_DR + 2],
-            d_now,
-            i0,
-            x[:2] - aux[A_DR : A_DR + 2],
-        )
-        return window
+        """:func:`dr_window` over the last ``length_m`` of travel. With
+        ``extensions.gap_route_bridge`` it starts no earlier than the end of an IMU gap in the
+        outage: across the gap the track is a straight line the wheels' distance long, a shape
+        nobody measured (too short a window then fails ``gates.min_pairs``)."""
+        if self.p.extensions.gap_route_bridge:
+            ends = self.gaps_ended(float(aux[A_TIME]))
+            if len(ends):
+                rows = out[:n_out]
+                k = min(int(np.searchsorted(rows[:, O_T], float(ends[-1]), side="left")), n_out - 1)
+                length_m = min(length_m, float(aux[A_DIST]) - float(rows[k, O_DIST]))
+        return dr_window(out, n_out, x, aux, length_m)
 
     def match(self, out: F64, n_out: int, x: F64, P: F64, aux: F64) -> MatchRecord:
         """One attempt's match (P must be propagated to the attempt time), its along-track
@@ -881,21 +898,7 @@ class Driver:
 
         With a map bias the window is matched to the route moved back by it, and to the lane
         it learned, both as the outage's matches have corrected them (:meth:`_route_estimate`)."""
-        tr = self.track
-        lane, route = tr.lane, self.route
-        bias_key: tuple[float, ...] = ()
-        if tr.bias is not None:
-            offset, lane = self._route_estimate(aux)
-            turn = self._route_turn(aux)
-            key = (float(offset[0]), float(offset[1]), turn)
-            if tr.biased_route is None or tr.biased_key != key:
-                tr.biased_route = Route(
-                    xy_moved_back(self.route.xy, offset, turn, tr.bias.pivot),
-                    name=self.route.name,
-                    source=self.route.source,
-                )
-                tr.biased_key = key
-            route, bias_key = tr.biased_route, key
+        route, lane, bias_key = self._road(aux)
         return self.memo.get(
             ("geometry", pred, lane, bias_key, geometry_params(params), window_scale_sigma_m),
             (window_xy, p_dr, cov),
@@ -910,6 +913,25 @@ class Driver:
                 window_scale_sigma_m=window_scale_sigma_m,
             ),
         )
+
+    def _road(self, aux: F64) -> tuple[Route, float, tuple[float, ...]]:
+        """The road driven as the current interval knows it: the route moved back by the map
+        bias (as the outage's matches have corrected it), the lane offset, and the key of the
+        bias moved back by (empty without one)."""
+        tr = self.track
+        if tr.bias is None:
+            return self.route, tr.lane, ()
+        offset, lane = self._route_estimate(aux)
+        turn = self._route_turn(aux)
+        key = (float(offset[0]), float(offset[1]), turn)
+        if tr.biased_route is None or tr.biased_key != key:
+            tr.biased_route = Route(
+                xy_moved_back(self.route.xy, offset, turn, tr.bias.pivot),
+                name=self.route.name,
+                source=self.route.source,
+            )
+            tr.biased_key = key
+        return tr.biased_route, lane, key
 
     def _route_estimate(self, aux: F64) -> tuple[F64, float]:
         """The map bias and the lane offset of the current interval: as learned before the
@@ -956,6 +978,7 @@ class Driver:
     def _attempt_live(self) -> None:
         f = self.filt
         flush_covariance(f.P, f.aux, self.inp.cfg)
+        bridged = self._bridged_on_route() if self.p.extensions.gap_route_bridge else {}
         n_out = f.n_out
         rec = self.match(f.out, n_out, f.x, f.P, f.aux)
         if not rec.accepted and self.p.extensions.reanchor:
@@ -990,6 +1013,8 @@ class Driver:
                 )
         epoch = f.write_row()
         rec = dataclasses.replace(rec, epoch=epoch, innovation=innovation, correction=correction)
+        if bridged:
+            rec = dataclasses.replace(rec, extra={**rec.extra, **bridged})
         self.records.append(rec)
         self.after_match(rec, f.x, f.aux)
 
@@ -1055,9 +1080,10 @@ class Driver:
         seconds, and every match is then refused for its heading, its rotation and the size of
         its correction. Once ``gates.reanchor_after`` consecutive attempts whose windows lie
         wholly after the gap are sound and within what the gap can explain
-        (:func:`~estimator.matching.reanchor.gap_bound_m`), the heading variance is widened to
-        the fitted rotation (with the velocity turned alike), the position covariance to the
-        innovation, and the match is applied."""
+        (:func:`~estimator.matching.reanchor.gap_bound_m`), heading and velocity are turned by
+        the fitted rotation (:func:`~estimator.filter.route_update.turn_about_up`), the heading
+        variance is widened by it, the position covariance to the innovation, and the match is
+        applied, its heading observation then with no innovation left."""
         f = self.filt
         t_now = float(f.aux[A_TIME])
         ends = self.gaps_ended(t_now)
@@ -1079,11 +1105,105 @@ class Driver:
         )
         if not should_reanchor(run, self.p, after_gap=True):
             return rec
+        turn_about_up(f.x, f.P, rec.rotation_rad)
         turn_heading(f.x, f.P, rec.rotation_rad**2)
         y = np.ascontiguousarray(rec.innovation, np.float64)
         widen_to_innovation(f.P, y, position_on_map_cov(f.P) + applied_obs_cov(rec, self.p))
         extra = {**rec.extra, "gap_end_s": float(ends[-1]) - self.log.t_start}
         return dataclasses.replace(rec, accepted=True, reanchored=True, extra=extra)
+
+    def bridge_due(self, t: float) -> bool:
+        """An IMU gap ended in the current outage by ``t`` that
+        :meth:`_bridged_on_route` has not looked at."""
+        ends = self.gaps_ended(t)
+        return len(ends) > 0 and float(ends[-1]) > self.track.bridged_gap_end
+
+    def _bridged_on_route(self) -> dict[str, float]:
+        """Bridge the IMU gap that ended since the last attempt along the route
+        (``extensions.gap_route_bridge``); returns what the attempt's record keeps of it, empty
+        where nothing was bridged.
+
+        The wheels carried the position across the gap by the distance they measured, but along
+        the heading before it: wherever the road turned inside the gap the state comes out of
+        it off the road and turned from it, with a covariance of half the gap's travel each way
+        (:func:`~estimator.filter.kernel._bridge`). Where the route placed the vehicle up to a
+        window before the gap, the same distance along the road (moved back by the map bias)
+        says where it is: the position is updated to that point and the heading to the road's
+        there. Along the road the point is as uncertain as the position was before the gap plus
+        the wheel scale's uncertainty over the distance; across, as a match
+        (``pseudo.cross_sigma_m``); the heading by ``pseudo.gap_bridge_heading_sigma_deg`` and
+        the map's rotation uncertainty."""
+        f = self.filt
+        tr = self.track
+        if not self.bridge_due(float(f.aux[A_TIME])) or tr.s is None:
+            return {}
+        end = float(self.gaps_ended(float(f.aux[A_TIME]))[-1])
+        tr.bridged_gap_end = end
+        rows = f.out[: f.n_out]
+        k = int(np.searchsorted(rows[:, O_T], end, side="left"))
+        if k == 0:
+            return {}
+        before = rows[k - 1]
+        dist_before = float(before[O_DIST])
+        if dist_before - tr.s_dist > self.p.window.length_m:
+            return {}
+        road, lane, _ = self._road(f.aux)
+        s0 = route_arc_length(
+            road,
+            before[O_POS : O_POS + 2],
+            s_guess=tr.s + (dist_before - tr.s_dist),
+            params=self.p,
+        )
+        travelled = float(f.aux[A_DIST]) - dist_before
+        forward = float(road.tangent_at(s0)[0] @ before[O_VEL : O_VEL + 2]) >= 0.0
+        s1 = s0 + travelled if forward else s0 - travelled
+        if not 0.0 <= s1 <= road.length:
+            return {}
+        u0, u, normal = road.tangent_at(s0)[0], road.tangent_at(s1)[0], road.normal_at(s1)[0]
+        if not (self.p.offset.enabled and math.isfinite(lane)):
+            lane = 0.0
+        z = road.point_at(s1)[0] + lane * normal
+        along_var = (
+            float(u0**2 @ before[O_SIG_POS : O_SIG_POS + 2] ** 2)
+            + float(f.P[E_SCALE, E_SCALE]) * travelled**2
+        )
+        cross_var = self.p.pseudo.cross_sigma_m**2
+        cov = along_var * np.outer(u, u) + cross_var * np.outer(normal, normal)
+        road_yaw = float(road.smooth_heading_at(s1)[0]) + (0.0 if forward else math.pi)
+        q = f.x[X_QUAT : X_QUAT + 4]
+        d = road_yaw - float(yaw_from_quaternion(q[0], q[1], q[2], q[3]))
+        dyaw = math.atan2(math.sin(d), math.cos(d))
+        yaw_var = math.radians(self.p.pseudo.gap_bridge_heading_sigma_deg) ** 2
+        if tr.bias is not None:
+            yaw_var += tr.bias.turn_var
+        cfg = self.inp.cfg
+        turn_about_up(f.x, f.P, dyaw)
+        turned = dyaw + heading_update(f.x, f.P, f.aux, cfg, 0.0, yaw_var)
+        moved = pseudo_position_update(
+            f.x,
+            f.P,
+            f.aux,
+            cfg,
+            z,
+            cov,
+            normal * float(self.p.extensions.lane_offset_state),
+            1.0,
+            normal,
+        )
+        if not finite_state(f.x, f.P):
+            raise LogError(
+                self.log.path,
+                "the filter diverged (non-finite state) bridging the IMU gap that ended at "
+                f"{end - self.log.t_start:.2f} s along the route",
+            )
+        if self.twin is not None:
+            self.twin = self._twin(float(f.aux[A_TIME]))
+        return {
+            "gap_bridge_end_s": end - self.log.t_start,
+            "gap_bridge_along_m": travelled,
+            "gap_bridge_turn_deg": math.degrees(turned),
+            "gap_bridge_moved_m": float(np.hypot(moved[2], moved[3])),
+        }
 
     def _refusal_run(
         self,
@@ -1125,6 +1245,23 @@ class Driver:
 
     def epochs(self) -> Epochs:
         return epochs_of(self.filt.out, self.filt.n_out, self.inp.degraded)
+
+
+def dr_window(out: F64, n_out: int, x: F64, aux: F64, length_m: float) -> F64:
+    """The DR track over the last ``length_m`` of travel, integrated from the mechanised
+    velocity only (no correction jumps), translated to end at the estimate."""
+    dist = out[:n_out, O_DIST]
+    d_now = float(aux[A_DIST])
+    i0 = max(search_right(dist, d_now - length_m) - 1, 0)
+    window: F64 = track_window(
+        out[:n_out, O_DR : O_DR + 2],
+        dist,
+        aux[A_DR : A_DR + 2],
+        d_now,
+        i0,
+        x[:2] - aux[A_DR : A_DR + 2],
+    )
+    return window
 
 
 def _track_cov(track: F64) -> F64:

@@ -206,6 +206,7 @@ MATCHING_EXTENSIONS = (
     "weak_along_track",
     "reanchor",
     "gap_reacquire",
+    "gap_route_bridge",
     "calibrated_approach",
     "along_drift_evidence",
     "dr_separation",
@@ -289,6 +290,11 @@ def _replay_attempts(d: Driver, old: ReuseState) -> None:
                     d.loop(cp.interval, None)
                     return
             continue
+        if d.p.extensions.gap_route_bridge and d.bridge_due(float(aux0[A_TIME])):
+            # the bridge changes the filter before the attempt: run live from it
+            _restart(d, old, cp, n_cp + 1, records)
+            d.loop(cp.interval, cp)
+            return
         P = P0.copy()
         aux = aux0.copy()
         flush_covariance(P, aux, d.inp.cfg)

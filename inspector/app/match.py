@@ -32,6 +32,13 @@ REACQUIRED = (
 )
 """the line under the head of a re-anchored attempt (an ACCEPTED with failed gates reads as a
 contradiction without it)"""
+BRIDGED = (
+    "Before this attempt the IMU gap that ended at {end:.1f} s was bridged along the route: the "
+    "wheels' {along:.0f} m along the road moved the position {moved:.1f} m from the straight "
+    "line the gap left it on and turned its heading {turn:+.1f} deg to the road's "
+    "(extensions.gap_route_bridge)."
+)
+"""the line under the head of the attempt an IMU gap was bridged along the route before"""
 
 
 def _fmt(v: Any, digits: int = 3) -> str:
@@ -82,6 +89,15 @@ def match_markdown(
             else REACQUIRED.format(end=end, turn=float(np.degrees(m.rotation_rad)))
         )
         lines += [f"*{why}*", ""]
+    if "gap_bridge_end_s" in m.extra:
+        e = m.extra
+        bridged = BRIDGED.format(
+            end=e["gap_bridge_end_s"],
+            along=e["gap_bridge_along_m"],
+            moved=e["gap_bridge_moved_m"],
+            turn=e["gap_bridge_turn_deg"],
+        )
+        lines += [f"*{bridged}*", ""]
     lines += [
         "| gate | value | limit | verdict |",
         "|---|---:|---:|---|",

@@ -548,7 +548,7 @@ def ref_window(out, n_out, x, aux, length_m):
 @pytest.mark.parametrize("seed", range(10))
 def test_window_is_the_numpy_window(seed):
     from estimator.filter import layout as ekf
-    from estimator.pipeline.driver import Driver as _Driver
+    from estimator.pipeline.driver import dr_window
 
     rng = np.random.default_rng(seed)
     n = int(rng.integers(1, 3000))
@@ -558,5 +558,5 @@ def test_window_is_the_numpy_window(seed):
     aux[ekf.A_DIST] = out[n - 1, ekf.O_DIST] + rng.choice([0.0, 1e-7, 0.7])
     x = rng.normal(size=ekf.NX) * 1e3
     for length in (5.0, 250.0, 1e6):
-        got = _Driver._window(None, out, n, x, aux, length)  # type: ignore[arg-type]
+        got = dr_window(out, n, x, aux, length)
         np.testing.assert_array_equal(got, ref_window(out, n, x, aux, length))

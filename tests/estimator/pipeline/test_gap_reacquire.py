@@ -1,7 +1,9 @@
 """Re-acquiring the heading from the route after an IMU gap inside a tunnel
-(``extensions.gap_reacquire``): stress-corpus drive 36, a 28 s gap 2.3 km into the long tunnel,
-which turns about 18 deg inside it. The wheels carry the position across along the last
-heading; nothing but the route can tell the heading afterwards."""
+(``extensions.gap_reacquire``), where the gap is not bridged along the route
+(``extensions.gap_route_bridge`` off, or no match placed the vehicle just before the gap): the
+multi-tunnel sample with no IMU for 20 s inside its second tunnel, where the road turns 36 deg.
+The wheels carry the position across along the last heading; nothing but the route can tell
+the heading afterwards."""
 
 from __future__ import annotations
 
@@ -9,85 +11,103 @@ import math
 
 import numpy as np
 import pytest
+from numpy.typing import NDArray
 
 from estimator.evaluation.metrics import deviation_series
 from estimator.params import Params, with_values
-from estimator.pipeline import run, run_methods
+from estimator.pipeline import open_inputs, run, run_methods
+from estimator.pipeline.inputs import Inputs
 from estimator.results import Run
-from estimator.sim.stress import Drive, build, drive_spec
+from tests.estimator._gaps import SAMPLES, without_imu
+
+F64 = NDArray[np.float64]
+
+GAP = (237.0, 257.0)
+"""s after the log start: inside the multi-tunnel sample's second tunnel (197-291 s)"""
+NO_BRIDGE = {"extensions.gap_route_bridge": False}
 
 
 @pytest.fixture(scope="module")
-def drive() -> Drive:
-    return build(drive_spec(36))
+def gapped() -> Inputs:
+    multi = open_inputs(SAMPLES / "multi_tunnel.mcap", SAMPLES / "multi_tunnel.route.geojson")
+    return without_imu(multi, *GAP)
 
 
 @pytest.fixture(scope="module")
-def runs(drive: Drive) -> dict[str, Run]:
-    both = run_methods(drive.inputs, Params(), methods=("baseline", "proposed"))
-    off = with_values(Params(), {"extensions.gap_reacquire": False})
+def runs(gapped: Inputs) -> dict[str, Run]:
+    p = with_values(Params(), NO_BRIDGE)
+    off = with_values(p, {"extensions.gap_reacquire": False})
     return {
-        "baseline": both["baseline"],
-        "proposed": both["proposed"],
-        "off": run_methods(drive.inputs, off, methods=("proposed",))["proposed"],
+        "proposed": run_methods(gapped, p, methods=("proposed",))["proposed"],
+        "off": run_methods(gapped, off, methods=("proposed",))["proposed"],
     }
 
 
-def _rmse_after_gap(run: Run, drive: Drive) -> float:
-    route = drive.inputs.route
-    assert route is not None
-    truth = deviation_series(run, route, drive.inputs.log).truth
+def _after(run: Run, gapped: Inputs, since: float) -> tuple[F64, F64]:
+    """Error against truth (m) and yaw error (deg) from ``since`` (s after the log start) to
+    the end of the outage the gap is in."""
+    truth = gapped.log.truth
+    assert gapped.route is not None and truth is not None
+    series = deviation_series(run, gapped.route, gapped.log).truth
+    assert series is not None
+    t0 = gapped.log.t_start
+    t = run.epochs.t[series.index] - t0
+    (end,) = [b - t0 for a, b in run.degraded_intervals if a - t0 < GAP[1] < b - t0]
+    after = (t > since) & (t < end)
+    assert after.sum() > 50
+    yaw = run.epochs.attitude[series.index, 2][after]
+    true_yaw = np.interp(run.epochs.t[series.index][after], truth.t, np.unwrap(truth.heading))
+    return series.h_err_m[after], np.degrees(np.angle(np.exp(1j * (yaw - true_yaw))))
+
+
+def test_the_road_turns_inside_the_gap(gapped: Inputs) -> None:
+    truth, t0 = gapped.log.truth, gapped.log.t_start
     assert truth is not None
-    t = run.epochs.t[truth.index] - drive.inputs.log.t_start
-    (_, b), *_ = run.degraded_intervals
-    after = (t > 300.0) & (t < b - drive.inputs.log.t_start)
-    assert after.sum() > 100
-    return float(np.sqrt(np.mean(truth.h_err_m[after] ** 2)))
+    yaw = np.unwrap(truth.heading)
+    turn = np.interp(t0 + GAP[1], truth.t, yaw) - np.interp(t0 + GAP[0], truth.t, yaw)
+    assert math.degrees(turn) == pytest.approx(-36.1, abs=0.5)
 
 
-def test_the_gap_is_where_the_drive_says(drive: Drive) -> None:
-    gap = np.diff(drive.inputs.log.imu.t)
-    assert gap.max() == pytest.approx(drive.spec.imu_gap_s, abs=0.05)
-
-
-def test_the_route_re_acquires_the_heading_the_gap_hid(runs: dict[str, Run], drive: Drive) -> None:
-    baseline = _rmse_after_gap(runs["baseline"], drive)
-    proposed = _rmse_after_gap(runs["proposed"], drive)
-    off = _rmse_after_gap(runs["off"], drive)
-    assert baseline > 300.0
-    # without the switch the run after the gap is about dead reckoning's (within 10 %: the
-    # map bias learned before the tunnel holds it closer to the road up to the gap)
-    assert off > 0.85 * baseline
-    assert proposed < 0.2 * baseline
+def test_the_route_re_acquires_the_heading_the_gap_hid(
+    runs: dict[str, Run], gapped: Inputs
+) -> None:
     (first, *_) = [m for m in runs["proposed"].matches if "gap_end_s" in m.extra]
     assert first.accepted and first.reanchored
     # turned beyond what the rotation gate lets through without a gap, within the gap's bound
     turn = abs(math.degrees(first.rotation_rad))
     assert runs["proposed"].params.gates.max_rotation_deg < turn < 45.0
+    since = first.t - gapped.log.t_start + 0.5
+    err, yaw_err = _after(runs["proposed"], gapped, since)
+    err_off, yaw_err_off = _after(runs["off"], gapped, since)
+    # heading and velocity turned by the whole rotation: the heading is the road's after it
+    assert np.abs(yaw_err).max() < 2.0
+    assert np.abs(yaw_err_off).min() > 30.0
+    assert np.sqrt(np.mean(err**2)) < 0.3 * np.sqrt(np.mean(err_off**2))
+    # the heading observation only narrows the variance of a heading already turned
     assert first.heading_observation is not None
-    assert first.heading_observation.correction_rad == pytest.approx(first.rotation_rad, rel=0.1)
+    assert abs(first.heading_observation.yaw_rad) == 0.0
+    assert abs(first.heading_observation.correction_rad) < math.radians(0.5)
     assert not any("gap_end_s" in m.extra for m in runs["off"].matches)
 
 
 def test_the_re_acquisition_is_named(runs: dict[str, Run]) -> None:
     (line,) = [w for w in runs["proposed"].warnings if w.startswith("heading re-acquired")]
-    assert "after the IMU gap that ended at 294." in line
+    assert "after the IMU gap that ended at 257.0 s" in line
     assert not any(w.startswith("heading re-acquired") for w in runs["off"].warnings)
 
 
 @pytest.mark.parametrize("before", [False, True], ids=["switched on", "switched off"])
-def test_a_re_run_with_the_switch_flipped_is_a_fresh_run(drive: Drive, before: bool) -> None:
+def test_a_re_run_with_the_switch_flipped_is_a_fresh_run(gapped: Inputs, before: bool) -> None:
     """The inspector re-runs from the first attempt whose outcome changes: a re-acquisition
     depends on the attempts before it, so flipping the switch must re-run from the first one
     after the gap that could re-anchor, not copy the old refusals."""
-    inp = drive.inputs
 
     def params(on: bool) -> Params:
-        return with_values(Params(), {"extensions.gap_reacquire": on})
+        return with_values(Params(), {**NO_BRIDGE, "extensions.gap_reacquire": on})
 
-    old = run(inp.log, inp.route, params(before), frame=inp.frame)
-    reused = run(inp.log, inp.route, params(not before), frame=inp.frame, reuse=old)
-    fresh = run(inp.log, inp.route, params(not before), frame=inp.frame)
+    old = run(gapped.log, gapped.route, params(before), frame=gapped.frame)
+    reused = run(gapped.log, gapped.route, params(not before), frame=gapped.frame, reuse=old)
+    fresh = run(gapped.log, gapped.route, params(not before), frame=gapped.frame)
     np.testing.assert_array_equal(reused.epochs.position, fresh.epochs.position)
     assert [m.accepted for m in reused.matches] == [m.accepted for m in fresh.matches]
     assert any(m.reanchored for m in fresh.matches) == (not before)
