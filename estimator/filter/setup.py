@@ -305,9 +305,8 @@ def imu_gap_warnings(
         done = (
             f"re-aligned from the GNSS track at {at:.1f} s"
             if at is not None
-            else f"not re-aligned (no GNSS as the IMU came back, or no straight GNSS track "
-            f"within {REALIGN_WITHIN_S:g} s after it): the filter re-placed at the first fix "
-            "after it, the heading carried across it left to the fixes after it"
+            else f"not re-aligned (no straight GNSS track within {REALIGN_WITHIN_S:g} s after "
+            "it): the next fixes re-place it and its heading"
         )
         lines.append(
             f"IMU gap {start[i]:.1f}-{end[i]:.1f} s: no estimate inside it, the position "

@@ -312,12 +312,19 @@ def unplaced_along_warnings(
     the road, so the trace sits on the route and every attempt reads "accepted"; but where the
     road runs straight they cannot tell where along it the vehicle is, and there the run is
     dead reckoning's (without wheel speed its along-track error grows with the square of the
-    time). The route-relative deviation cannot show this; the filter's own sigma does."""
+    time). The route-relative deviation cannot show this; the filter's own sigma does. The
+    rows from the end of an IMU gap to its bridge along the route
+    (``extensions.gap_route_bridge``) are left out: the gap's sigma there is the gap's, which
+    its own line names, and the bridge placed the vehicle along the road."""
     sigma = np.hypot(epochs.position_sigma[:, 0], epochs.position_sigma[:, 1])
+    bridging = np.zeros(len(epochs.t), bool)
+    for r in records:
+        if "gap_bridge_end_s" in r.extra:
+            bridging |= (epochs.t >= t_start + r.extra["gap_bridge_end_s"]) & (epochs.t < r.t)
     lines = []
     for a, b in degraded:
         accepted = sum(1 for r in records if r.accepted and a <= r.t <= b)
-        inside = np.flatnonzero((epochs.t >= a) & (epochs.t <= b))
+        inside = np.flatnonzero((epochs.t >= a) & (epochs.t <= b) & ~bridging)
         over = inside[sigma[inside] > UNPLACED_SIGMA_M]
         if accepted == 0 or len(over) == 0:
             continue

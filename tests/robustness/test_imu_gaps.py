@@ -30,6 +30,7 @@ from estimator.pipeline import open_inputs, run_methods
 from estimator.pipeline.inputs import Inputs
 from estimator.results import Run
 from estimator.sim.stress import build, drive_spec
+from inspector.app.playback import MAX_WARNING_CHARS
 from tests.estimator._gaps import SAMPLES, without_imu
 
 F64 = NDArray[np.float64]
@@ -151,6 +152,7 @@ def test_gap_lines_are_bounded_whatever_the_count(n: int) -> None:
     left_out = np.full(n, 30, np.intp)
     lines = imu_gap_warnings(start, end, left_out, realigned, have_wheel=False)
     assert len(lines) == min(n, IMU_GAPS_NAMED)
+    assert max(map(len, lines)) <= MAX_WARNING_CHARS  # the inspector shows them whole
     named = lines if n <= IMU_GAPS_NAMED else lines[:-1]
     for i, line in enumerate(named):
         assert line.startswith(f"IMU gap {start[i]:.1f}-{end[i]:.1f} s: ")

@@ -44,7 +44,7 @@ def test_a_sigma_over_the_threshold_with_updates_accepted_is_reported_once_per_o
     t = np.arange(0.0, 100.0, 1.0)
     sigma = np.where((t >= 40) & (t <= 60), 30.0, 5.0)
     sigma[50] = 45.0
-    accepted = [SimpleNamespace(t=float(x), accepted=True) for x in range(10, 90, 5)]
+    accepted = [SimpleNamespace(t=float(x), accepted=True, extra={}) for x in range(10, 90, 5)]
     (line,) = unplaced_along_warnings(_epochs(t, sigma), accepted, [(5.0, 95.0)], 0.0)
     m = WARNING.match(line)
     assert m, line
@@ -53,12 +53,25 @@ def test_a_sigma_over_the_threshold_with_updates_accepted_is_reported_once_per_o
     assert (m["first"], m["peak"], m["at"], m["lasting"]) == ("40.0", "45", "50.0", "21")
     # another outage with the same sigma but only refused attempts: dead reckoning, which the
     # trace does not hide (it leaves the route), is not this warning's business
-    refused = [SimpleNamespace(t=float(x), accepted=False) for x in range(10, 90, 5)]
+    refused = [SimpleNamespace(t=float(x), accepted=False, extra={}) for x in range(10, 90, 5)]
     assert unplaced_along_warnings(_epochs(t, sigma), refused, [(5.0, 95.0)], 0.0) == ()
     # at or under the threshold, or outside every outage: nothing
     low = np.minimum(sigma, UNPLACED_SIGMA_M)
     assert unplaced_along_warnings(_epochs(t, low), accepted, [(5.0, 95.0)], 0.0) == ()
     assert unplaced_along_warnings(_epochs(t, sigma), accepted, [(70.0, 95.0)], 0.0) == ()
+
+
+def test_the_sigma_of_an_imu_gap_the_route_bridged_is_the_gaps_own():
+    """From an IMU gap's end to its bridge along the route the sigma is the gap's (half its
+    travel), which the gap's own line names; the bridge placed the vehicle along the road."""
+    t = np.r_[np.arange(0.0, 40.0, 1.0), np.arange(70.0, 100.0, 1.0)]
+    sigma = np.where(t == 70.0, 700.0, 5.0)
+    records = [SimpleNamespace(t=float(x), accepted=True, extra={}) for x in range(10, 90, 5)]
+    (line,) = unplaced_along_warnings(_epochs(t, sigma), records, [(5.0, 95.0)], 0.0)
+    assert "reached 700 m at 70.0 s (31 s over" in line
+    bridged = {"gap_bridge_end_s": 69.9}
+    records[12] = SimpleNamespace(t=70.2, accepted=False, extra=bridged)
+    assert unplaced_along_warnings(_epochs(t, sigma), records, [(5.0, 95.0)], 0.0) == ()
 
 
 @pytest.mark.slow

@@ -76,3 +76,26 @@ def test_match_panel_says_why_a_refused_match_was_applied():
     text = match_markdown(after_gap, t_rel=50.0, total=5)
     assert "the IMU gap that ended at 294.2 s" in text and "(-19.9 deg here)" in text
     assert REANCHORED not in text
+
+
+def test_match_panel_says_an_imu_gap_was_bridged_before_the_attempt():
+    """The attempt an IMU gap was bridged along the route before carries a line saying so,
+    with how far along the road, how far the position moved and how the heading turned."""
+    import dataclasses
+
+    m = make_run(rejected=()).matches[1]
+    plain = match_markdown(m, t_rel=50.0, total=5)
+    assert "bridged along the route" not in plain
+    extra = {
+        "gap_bridge_end_s": 196.0,
+        "gap_bridge_along_m": 344.2,
+        "gap_bridge_moved_m": 173.7,
+        "gap_bridge_turn_deg": 59.1,
+    }
+    text = match_markdown(dataclasses.replace(m, extra={**m.extra, **extra}), total=5)
+    assert (
+        "*Before this attempt the IMU gap that ended at 196.0 s was bridged along the route: the "
+        "wheels' 344 m along the road moved the position 173.7 m from the straight line the gap "
+        "left it on and turned its heading +59.1 deg to the road's "
+        "(extensions.gap_route_bridge).*"
+    ) in text
