@@ -740,7 +740,7 @@ class Driver:
             ends = self.gaps_ended(float(aux[A_TIME]))
             if len(ends):
                 rows = out[:n_out]
-                k = min(int(np.searchsorted(rows[:, O_T], float(ends[-1]), side="left")), n_out - 1)
+                k = row_after_gap(rows, float(ends[-1]))
                 length_m = min(length_m, float(aux[A_DIST]) - float(rows[k, O_DIST]))
         return dr_window(out, n_out, x, aux, length_m)
 
@@ -1098,7 +1098,7 @@ class Driver:
             return rec
         n = f.n_out
         rows = f.out[:n]
-        j = min(search_right(rows[:, O_T], float(ends[-1])), n - 1)
+        j = row_after_gap(rows, float(ends[-1]))
         gap_dist = float(rows[j, O_DIST])
         bridged = gap_dist - float(rows[max(j - 1, 0), O_DIST])
         clean = gap_dist + self.p.window.length_m
@@ -1147,7 +1147,7 @@ class Driver:
         end = float(self.gaps_ended(float(f.aux[A_TIME]))[-1])
         tr.bridged_gap_end = end
         rows = f.out[: f.n_out]
-        k = int(np.searchsorted(rows[:, O_T], end, side="left"))
+        k = row_after_gap(rows, end)
         if k == 0:
             return {}
         before = rows[k - 1]
@@ -1252,6 +1252,13 @@ class Driver:
 
     def epochs(self) -> Epochs:
         return epochs_of(self.filt.out, self.filt.n_out, self.inp.degraded)
+
+
+def row_after_gap(rows: F64, end: float) -> int:
+    """The first of the output ``rows`` at or after an IMU gap's ``end`` (the first IMU sample
+    after it, where the kernel has bridged it and writes a row); the row before it is the last
+    before the gap. The last row if none is."""
+    return min(int(np.searchsorted(rows[:, O_T], end, side="left")), len(rows) - 1)
 
 
 def dr_window(out: F64, n_out: int, x: F64, aux: F64, length_m: float) -> F64:
