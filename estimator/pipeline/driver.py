@@ -31,7 +31,7 @@ from estimator.errors import LogError, RoutefuseError
 from estimator.evaluation.metrics import interval_mask
 from estimator.filter.engine import Filter, epochs_of
 from estimator.filter.gnss import widen_heading
-from estimator.filter.kernel import IMU_GAP_S, finite_state
+from estimator.filter.kernel import GAP_VEL_VAR, IMU_GAP_S, finite_state, wheel_distance
 from estimator.filter.layout import (
     A_DIST,
     A_DR,
@@ -1137,7 +1137,8 @@ class Driver:
         window before the gap, the same distance along the road (moved back by the map bias)
         says where it is: the position is updated to that point and the heading to the road's
         there. Along the road the point is as uncertain as the position was before the gap plus
-        the wheel scale's uncertainty over the distance; across, as a match
+        the wheel scale's uncertainty over the distance (without wheel speed, the last speed's
+        over the gap's time, as the kernel carried it); across, as a match
         (``pseudo.cross_sigma_m``); the heading by ``pseudo.gap_bridge_heading_sigma_deg`` and
         the map's rotation uncertainty."""
         f = self.filt
@@ -1154,6 +1155,14 @@ class Driver:
         dist_before = float(before[O_DIST])
         if dist_before - tr.s_dist > self.p.window.length_m:
             return {}
+        wheels = self.inp.wheel_t
+        span = float(rows[k, O_T] - before[O_T])
+        if (
+            len(wheels)
+            and wheel_distance(float(before[O_T]), float(rows[k, O_T]), wheels, self.inp.wheel_v)[0]
+            < 0.0
+        ):
+            return {}  # the wheels fell silent with the IMU: a paused recording, held
         road, lane, _ = self._road(f.aux)
         s0 = route_arc_length(
             road,
@@ -1170,9 +1179,8 @@ class Driver:
         if not (self.p.offset.enabled and math.isfinite(lane)):
             lane = 0.0
         z = road.point_at(s1)[0] + lane * normal
-        along_var = (
-            float(u0**2 @ before[O_SIG_POS : O_SIG_POS + 2] ** 2)
-            + float(f.P[E_SCALE, E_SCALE]) * travelled**2
+        along_var = float(u0**2 @ before[O_SIG_POS : O_SIG_POS + 2] ** 2) + (
+            float(f.P[E_SCALE, E_SCALE]) * travelled**2 if len(wheels) else GAP_VEL_VAR * span**2
         )
         cross_var = self.p.pseudo.cross_sigma_m**2
         cov = along_var * np.outer(u, u) + cross_var * np.outer(normal, normal)

@@ -5,6 +5,7 @@ road is, and which way the road runs there."""
 
 from __future__ import annotations
 
+import dataclasses
 import math
 
 import numpy as np
@@ -145,3 +146,36 @@ def test_a_re_run_is_a_fresh_run(gapped: Inputs, before: dict, after: dict) -> N
     np.testing.assert_array_equal(reused.epochs.position, fresh.epochs.position)
     assert [m.extra for m in reused.matches] == [m.extra for m in fresh.matches]
     assert reused.warnings == fresh.warnings
+
+
+def _sigma_after_bridge(r: Run) -> float:
+    (first,) = _bridged(r)
+    k = first.epoch
+    return float(np.hypot(*r.epochs.position_sigma[k, :2]))
+
+
+def test_without_wheel_speed_the_bridge_is_as_unsure_along_the_road_as_the_speed(
+    runs: dict[str, Run], gapped: Inputs
+) -> None:
+    """Without wheel speed the kernel carried the position by the last velocity, whose
+    5 m/s over 20 s leave it 100 m unsure along the road: the bridge still turns the heading to
+    the road's and puts the vehicle on it, but claims no more along the road than that."""
+    no_wheel = dataclasses.replace(gapped, log=dataclasses.replace(gapped.log, wheel=None))
+    r = run_methods(no_wheel, Params(), methods=("proposed",))["proposed"]
+    (first,) = _bridged(r)
+    assert first.extra["gap_bridge_turn_deg"] == pytest.approx(_truth_turn(gapped), abs=3.0)
+    assert _sigma_after_bridge(r) > 50.0
+    assert _sigma_after_bridge(runs["proposed"]) < 10.0
+
+
+def test_a_paused_recording_is_not_bridged(gapped: Inputs) -> None:
+    """The wheels fell silent with the IMU (a paused recording): the kernel held the position,
+    and nothing says how far the vehicle went, so nothing is bridged."""
+    wheel, t0 = gapped.log.wheel, gapped.log.t_start
+    assert wheel is not None
+    keep = ~((wheel.t >= t0 + GAP[0]) & (wheel.t < t0 + GAP[1]))
+    silent = dataclasses.replace(wheel, t=wheel.t[keep], speed=wheel.speed[keep])
+    paused = dataclasses.replace(gapped, log=dataclasses.replace(gapped.log, wheel=silent))
+    r = run_methods(paused, Params(), methods=("proposed",))["proposed"]
+    assert not _bridged(r)
+    assert not any("bridged along the route" in w for w in r.warnings)
