@@ -6,18 +6,16 @@ road is, and which way the road runs there."""
 from __future__ import annotations
 
 import dataclasses
-import math
 
 import numpy as np
 import pytest
 from numpy.typing import NDArray
 
-from estimator.evaluation.metrics import deviation_series
 from estimator.params import Params, with_values
 from estimator.pipeline import open_inputs, run, run_methods
 from estimator.pipeline.inputs import Inputs
 from estimator.results import Gate, MatchRecord, Run
-from tests.estimator._gaps import SAMPLES, without_imu
+from tests.estimator._gaps import SAMPLES, errors_after, truth_turn_deg, without_imu
 
 F64 = NDArray[np.float64]
 
@@ -43,29 +41,11 @@ def runs(gapped: Inputs) -> dict[str, Run]:
 
 
 def _truth_turn(gapped: Inputs) -> float:
-    truth, t0 = gapped.log.truth, gapped.log.t_start
-    assert truth is not None
-    yaw = np.unwrap(truth.heading)
-    a, b = GAP
-    return math.degrees(float(np.interp(t0 + b, truth.t, yaw) - np.interp(t0 + a, truth.t, yaw)))
+    return truth_turn_deg(gapped, *GAP)
 
 
 def _after_gap(run: Run, gapped: Inputs, since: float = GAP[1]) -> tuple[F64, F64]:
-    """Error against truth (m) and yaw error (deg) from ``since`` (s after the log start; the
-    gap's end) to the end of the outage."""
-    assert gapped.route is not None and gapped.log.truth is not None
-    truth = deviation_series(run, gapped.route, gapped.log).truth
-    assert truth is not None
-    t0 = gapped.log.t_start
-    t = run.epochs.t[truth.index] - t0
-    (end,) = [b - t0 for a, b in run.degraded_intervals if a - t0 < GAP[1] < b - t0]
-    after = (t > since) & (t < end)
-    assert after.sum() > 100
-    yaw = run.epochs.attitude[truth.index, 2][after]
-    true_yaw = np.interp(
-        run.epochs.t[truth.index][after], gapped.log.truth.t, np.unwrap(gapped.log.truth.heading)
-    )
-    return truth.h_err_m[after], np.degrees(np.angle(np.exp(1j * (yaw - true_yaw))))
+    return errors_after(run, gapped, GAP[1], since)
 
 
 def _bridged(run: Run) -> list[MatchRecord]:

@@ -13,12 +13,11 @@ import numpy as np
 import pytest
 from numpy.typing import NDArray
 
-from estimator.evaluation.metrics import deviation_series
 from estimator.params import Params, with_values
 from estimator.pipeline import open_inputs, run, run_methods
 from estimator.pipeline.inputs import Inputs
 from estimator.results import Run
-from tests.estimator._gaps import SAMPLES, without_imu
+from tests.estimator._gaps import SAMPLES, errors_after, truth_turn_deg, without_imu
 
 F64 = NDArray[np.float64]
 
@@ -43,29 +42,8 @@ def runs(gapped: Inputs) -> dict[str, Run]:
     }
 
 
-def _after(run: Run, gapped: Inputs, since: float) -> tuple[F64, F64]:
-    """Error against truth (m) and yaw error (deg) from ``since`` (s after the log start) to
-    the end of the outage the gap is in."""
-    truth = gapped.log.truth
-    assert gapped.route is not None and truth is not None
-    series = deviation_series(run, gapped.route, gapped.log).truth
-    assert series is not None
-    t0 = gapped.log.t_start
-    t = run.epochs.t[series.index] - t0
-    (end,) = [b - t0 for a, b in run.degraded_intervals if a - t0 < GAP[1] < b - t0]
-    after = (t > since) & (t < end)
-    assert after.sum() > 50
-    yaw = run.epochs.attitude[series.index, 2][after]
-    true_yaw = np.interp(run.epochs.t[series.index][after], truth.t, np.unwrap(truth.heading))
-    return series.h_err_m[after], np.degrees(np.angle(np.exp(1j * (yaw - true_yaw))))
-
-
 def test_the_road_turns_inside_the_gap(gapped: Inputs) -> None:
-    truth, t0 = gapped.log.truth, gapped.log.t_start
-    assert truth is not None
-    yaw = np.unwrap(truth.heading)
-    turn = np.interp(t0 + GAP[1], truth.t, yaw) - np.interp(t0 + GAP[0], truth.t, yaw)
-    assert math.degrees(turn) == pytest.approx(-36.1, abs=0.5)
+    assert truth_turn_deg(gapped, *GAP) == pytest.approx(-36.1, abs=0.5)
 
 
 def test_the_route_re_acquires_the_heading_the_gap_hid(
@@ -77,8 +55,8 @@ def test_the_route_re_acquires_the_heading_the_gap_hid(
     turn = abs(math.degrees(first.rotation_rad))
     assert runs["proposed"].params.gates.max_rotation_deg < turn < 45.0
     since = first.t - gapped.log.t_start + 0.5
-    err, yaw_err = _after(runs["proposed"], gapped, since)
-    err_off, yaw_err_off = _after(runs["off"], gapped, since)
+    err, yaw_err = errors_after(runs["proposed"], gapped, GAP[1], since)
+    err_off, yaw_err_off = errors_after(runs["off"], gapped, GAP[1], since)
     # heading and velocity turned by the whole rotation: the heading is the road's after it
     assert np.abs(yaw_err).max() < 2.0
     assert np.abs(yaw_err_off).min() > 30.0
