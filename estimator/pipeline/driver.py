@@ -1172,12 +1172,15 @@ class Driver:
         )
         travelled = float(f.aux[A_DIST]) - dist_before
         forward = float(road.tangent_at(s0)[0] @ before[O_VEL : O_VEL + 2]) >= 0.0
+        if not (self.p.offset.enabled and math.isfinite(lane)):
+            lane = 0.0
         s1 = s0 + travelled if forward else s0 - travelled
+        if forward and lane != 0.0 and 0.0 <= s1 <= road.length:
+            # a lane to the left of the route is shorter round a left turn: driven = ds - lane dpsi
+            s1 += lane * road_turn(road, s0, s1, self.p.window.spacing_m)
         if not 0.0 <= s1 <= road.length:
             return {}
         u0, u, normal = road.tangent_at(s0)[0], road.tangent_at(s1)[0], road.normal_at(s1)[0]
-        if not (self.p.offset.enabled and math.isfinite(lane)):
-            lane = 0.0
         z = road.point_at(s1)[0] + lane * normal
         along_var = float(u0**2 @ before[O_SIG_POS : O_SIG_POS + 2] ** 2) + (
             float(f.P[E_SCALE, E_SCALE]) * travelled**2 if len(wheels) else GAP_VEL_VAR * span**2
@@ -1260,6 +1263,13 @@ class Driver:
 
     def epochs(self) -> Epochs:
         return epochs_of(self.filt.out, self.filt.n_out, self.inp.degraded)
+
+
+def road_turn(road: Route, s0: float, s1: float, spacing_m: float) -> float:
+    """How far the road turns (rad, left positive) from arc length ``s0`` to ``s1``."""
+    n = math.ceil(abs(s1 - s0) / max(spacing_m, 1e-3)) + 2
+    heading = np.unwrap(road.smooth_heading_at(np.linspace(s0, s1, n)))
+    return float(heading[-1] - heading[0])
 
 
 def row_after_gap(rows: F64, end: float) -> int:

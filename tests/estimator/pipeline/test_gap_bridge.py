@@ -13,8 +13,10 @@ from numpy.typing import NDArray
 
 from estimator.params import Params, with_values
 from estimator.pipeline import open_inputs, run, run_methods
+from estimator.pipeline.driver import road_turn
 from estimator.pipeline.inputs import Inputs
 from estimator.results import Gate, MatchRecord, Run
+from estimator.route import Route
 from tests.estimator._gaps import SAMPLES, errors_after, truth_turn_deg, without_imu
 
 F64 = NDArray[np.float64]
@@ -159,3 +161,14 @@ def test_a_paused_recording_is_not_bridged(gapped: Inputs) -> None:
     r = run_methods(paused, Params(), methods=("proposed",))["proposed"]
     assert not _bridged(r)
     assert not any("bridged along the route" in w for w in r.warnings)
+
+
+def test_the_road_turn_is_summed_along_the_road() -> None:
+    """A lane 3 m left of the route is 3 m x pi/2 shorter round a quarter-circle left turn; the
+    bridge adds that to the wheels' distance to find the route's arc length."""
+    a = np.linspace(0.0, 1.5 * np.pi, 400)  # three quarters of a circle, radius 100 m, left
+    road = Route(np.column_stack([100.0 * np.sin(a), 100.0 - 100.0 * np.cos(a)]))
+    quarter = 100.0 * np.pi / 2
+    assert road_turn(road, 10.0, 10.0 + quarter, 5.0) == pytest.approx(np.pi / 2, abs=0.01)
+    assert road_turn(road, 10.0, 10.0 + 2 * quarter, 5.0) == pytest.approx(np.pi, abs=0.01)
+    assert road_turn(road, 10.0 + quarter, 10.0, 5.0) == pytest.approx(-np.pi / 2, abs=0.01)
