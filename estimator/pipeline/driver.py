@@ -412,6 +412,8 @@ class Driver:
         """the run is the reused one (a baseline after a baseline)"""
         self.twin: DeadReckoningTwin | None = None
         """the current outage's dead-reckoning twin (``extensions.dr_separation``)"""
+        self.pending_bridge: dict[str, float] = {}
+        """an IMU gap bridged along the route since the last attempt, for its record"""
 
     @property
     def route(self) -> Route:
@@ -470,7 +472,11 @@ class Driver:
                 if t_try >= b or t_try > self.inp.imu_t[-1]:
                     break
                 redo = at is not None and i == at.interval and k == at.k
-                if not redo:
+                if redo:
+                    self.pending_bridge = dict(at.bridged)
+                else:
+                    if self.matching and self.p.extensions.gap_route_bridge:
+                        self._bridge_gaps_until(t_try)
                     f.advance(t_try)
                     if self.p.extensions.along_drift_evidence:
                         q = along_drift_psd(f.out[: f.n_out], a, t_try)
@@ -581,6 +587,7 @@ class Driver:
                 dist_a=dist_a,
                 dist_last=dist_last,
                 twin=None if self.twin is None else self.twin.copy(),
+                bridged=dict(self.pending_bridge),
             )
         )
 
@@ -985,7 +992,7 @@ class Driver:
     def _attempt_live(self) -> None:
         f = self.filt
         flush_covariance(f.P, f.aux, self.inp.cfg)
-        bridged = self._bridged_on_route() if self.p.extensions.gap_route_bridge else {}
+        bridged, self.pending_bridge = self.pending_bridge, {}
         n_out = f.n_out
         rec = self.match(f.out, n_out, f.x, f.P, f.aux)
         if not rec.accepted and self.p.extensions.reanchor:
@@ -1119,16 +1126,24 @@ class Driver:
         extra = {**rec.extra, "gap_end_s": float(ends[-1]) - self.log.t_start}
         return dataclasses.replace(rec, accepted=True, reanchored=True, extra=extra)
 
-    def bridge_due(self, t: float) -> bool:
-        """An IMU gap ended in the current outage by ``t`` that
-        :meth:`_bridged_on_route` has not looked at."""
-        ends = self.gaps_ended(t)
-        return len(ends) > 0 and float(ends[-1]) > self.track.bridged_gap_end
+    def _bridge_gaps_until(self, t: float) -> None:
+        """Run the filter to the end of each IMU gap of the outage that ends by ``t`` and bridge
+        it there along the route (:meth:`_bridged_on_route`), the output row at the gap's end
+        then showing the bridged state: the route and the wheels' distance are known the moment
+        the IMU comes back, not only at the next attempt."""
+        f = self.filt
+        ends = self.gap_ends
+        for end in ends[(ends > max(f.aux[A_TIME], self.track.t_start)) & (ends <= t)]:
+            f.advance(float(end))
+            bridged = self._bridged_on_route()
+            if bridged:
+                f.write_row()
+                self.pending_bridge = bridged
 
     def _bridged_on_route(self) -> dict[str, float]:
-        """Bridge the IMU gap that ended since the last attempt along the route
-        (``extensions.gap_route_bridge``); returns what the attempt's record keeps of it, empty
-        where nothing was bridged.
+        """Bridge the IMU gap that has just ended along the route
+        (``extensions.gap_route_bridge``); returns what the next attempt's record keeps of it,
+        empty where nothing was bridged.
 
         The wheels carried the position across the gap by the distance they measured, but along
         the heading before it: wherever the road turned inside the gap the state comes out of
@@ -1143,9 +1158,10 @@ class Driver:
         the map's rotation uncertainty."""
         f = self.filt
         tr = self.track
-        if not self.bridge_due(float(f.aux[A_TIME])) or tr.s is None:
+        ends = self.gaps_ended(float(f.aux[A_TIME]))
+        if not len(ends) or float(ends[-1]) <= tr.bridged_gap_end or tr.s is None:
             return {}
-        end = float(self.gaps_ended(float(f.aux[A_TIME]))[-1])
+        end = float(ends[-1])
         tr.bridged_gap_end = end
         rows = f.out[: f.n_out]
         k = row_after_gap(rows, end)

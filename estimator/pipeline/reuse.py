@@ -53,6 +53,9 @@ class Checkpoint:
     dist_last: float
     twin: DeadReckoningTwin | None = None
     """the outage's dead-reckoning twin as it was then (``extensions.dr_separation``)"""
+    bridged: dict[str, float] = field(default_factory=dict)
+    """an IMU gap bridged along the route since the previous attempt, for this attempt's record
+    (``extensions.gap_route_bridge``)"""
     uncalibrated_m: float | None = None
     """an outage left to dead reckoning (``extensions.calibrated_approach``): the driving with
     GNSS before it, m"""
@@ -251,6 +254,11 @@ def resume(d: Driver, old: ReuseState, old_params: Params, *, reuse_matching: bo
             == (old_params.gates.reanchor_after, old_params.gates.reanchor_gyro_bias_deg_s)
         )
         and (not p.extensions.map_bias or p.offset == old_params.offset)
+        and (
+            # the states after a gap bridged along the route hold what it was bridged with
+            not (p.extensions.gap_route_bridge and len(d.gap_ends))
+            or (p.pseudo, p.window) == (old_params.pseudo, old_params.window)
+        )
     )
     if not d.matching and not reuse_matching:
         # baseline after baseline: the filter and its inputs are the same, so is the run
@@ -290,11 +298,6 @@ def _replay_attempts(d: Driver, old: ReuseState) -> None:
                     d.loop(cp.interval, None)
                     return
             continue
-        if d.p.extensions.gap_route_bridge and d.bridge_due(float(aux0[A_TIME])):
-            # the bridge changes the filter before the attempt: run live from it
-            _restart(d, old, cp, n_cp + 1, records)
-            d.loop(cp.interval, cp)
-            return
         P = P0.copy()
         aux = aux0.copy()
         flush_covariance(P, aux, d.inp.cfg)
@@ -316,6 +319,7 @@ def _replay_attempts(d: Driver, old: ReuseState) -> None:
         rec = dataclasses.replace(
             rec,
             gates=(*rec.gates, *separation),
+            extra={**rec.extra, **cp.bridged},
             epoch=prev.epoch,
             innovation=prev.innovation,
             correction=prev.correction,
