@@ -264,10 +264,10 @@ def reacquire_warnings(records: Sequence[MatchRecord], t_start: float) -> tuple[
 def gap_bridge_warnings(records: Sequence[MatchRecord], t_start: float) -> tuple[str, ...]:
     """One line per IMU gap bridged along the route (``extensions.gap_route_bridge``)."""
     return tuple(
-        f"IMU gap that ended at {r.extra['gap_bridge_end_s']:.1f} s bridged along the route at "
-        f"{r.t - t_start:.1f} s: the wheels' {r.extra['gap_bridge_along_m']:.0f} m along the road "
-        f"moved the position {r.extra['gap_bridge_moved_m']:.1f} m from the straight line the gap "
-        f"left it on and turned its heading {r.extra['gap_bridge_turn_deg']:+.1f} deg to the road's"
+        f"IMU gap that ended at {r.extra['gap_bridge_end_s']:.1f} s bridged along the route there: "
+        f"the wheels' {r.extra['gap_bridge_along_m']:.0f} m along the road moved the position "
+        f"{r.extra['gap_bridge_moved_m']:.1f} m from the straight line the gap left it on and "
+        f"turned its heading {r.extra['gap_bridge_turn_deg']:+.1f} deg to the road's"
         for r in records
         if "gap_bridge_end_s" in r.extra
     )

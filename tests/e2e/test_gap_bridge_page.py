@@ -34,7 +34,7 @@ def test_bridged_gap_on_the_page(browser, tmp_path):
 
         page, view = session_page(browser, server, app, VIEWPORT)
         status = page.inner_text("body")
-        line = f"IMU gap that ended at {end:.1f} s bridged along the route at {t_match:.1f} s"
+        line = f"IMU gap that ended at {end:.1f} s bridged along the route there: the wheels'"
         assert line in status, status[:1500]
 
         page.get_by_role("tab", name="Match").click()

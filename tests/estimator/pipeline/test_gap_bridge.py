@@ -103,7 +103,7 @@ def test_no_window_reaches_back_across_the_gap(runs: dict[str, Run], gapped: Inp
 
 def test_the_bridge_is_named(runs: dict[str, Run]) -> None:
     (line,) = [w for w in runs["proposed"].warnings if "bridged along the route" in w]
-    assert line.startswith("IMU gap that ended at 196.0 s bridged along the route at 196.")
+    assert line.startswith("IMU gap that ended at 196.0 s bridged along the route there: ")
     assert "turned its heading +5" in line
     assert not any("bridged along the route" in w for w in runs["off"].warnings)
 
