@@ -472,7 +472,7 @@ class Driver:
                 if t_try >= b or t_try > self.inp.imu_t[-1]:
                     break
                 redo = at is not None and i == at.interval and k == at.k
-                if redo:
+                if at is not None and redo:
                     self.pending_bridge = dict(at.bridged)
                 else:
                     if self.matching and self.p.extensions.gap_route_bridge:
