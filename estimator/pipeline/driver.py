@@ -64,7 +64,12 @@ from estimator.filter.layout import (
 from estimator.filter.portal import advance_to_outage
 from estimator.filter.propagation import flush_covariance
 from estimator.filter.route_update import applied_obs_cov, apply_route_match, turn_about_up
-from estimator.filter.setup import FilterInputs, prepare_inputs, route_errors_estimated
+from estimator.filter.setup import (
+    IMU_GAPS_NAMED,
+    FilterInputs,
+    prepare_inputs,
+    route_errors_estimated,
+)
 from estimator.filter.twin import DeadReckoningTwin, Undone
 from estimator.filter.updates import (
     clone_lane_offset,
@@ -262,15 +267,27 @@ def reacquire_warnings(records: Sequence[MatchRecord], t_start: float) -> tuple[
 
 
 def gap_bridge_warnings(records: Sequence[MatchRecord], t_start: float) -> tuple[str, ...]:
-    """One line per IMU gap bridged along the route (``extensions.gap_route_bridge``)."""
-    return tuple(
-        f"IMU gap that ended at {r.extra['gap_bridge_end_s']:.1f} s bridged along the route there: "
-        f"the wheels' {r.extra['gap_bridge_along_m']:.0f} m along the road moved the position "
-        f"{r.extra['gap_bridge_moved_m']:.1f} m from the straight line the gap left it on and "
-        f"turned its heading {r.extra['gap_bridge_turn_deg']:+.1f} deg to the road's"
-        for r in records
-        if "gap_bridge_end_s" in r.extra
-    )
+    """One line per IMU gap bridged along the route (``extensions.gap_route_bridge``); beyond
+    :data:`~estimator.filter.setup.IMU_GAPS_NAMED` of them the rest are summed up in one line,
+    as the gaps' own lines are."""
+    bridged = [r.extra for r in records if "gap_bridge_end_s" in r.extra]
+    named = len(bridged) if len(bridged) <= IMU_GAPS_NAMED else IMU_GAPS_NAMED - 1
+    lines = [
+        f"IMU gap that ended at {e['gap_bridge_end_s']:.1f} s bridged along the route there: "
+        f"the wheels' {e['gap_bridge_along_m']:.0f} m along the road moved the position "
+        f"{e['gap_bridge_moved_m']:.1f} m from the straight line the gap left it on and "
+        f"turned its heading {e['gap_bridge_turn_deg']:+.1f} deg to the road's"
+        for e in bridged[:named]
+    ]
+    rest = bridged[named:]
+    if rest:
+        lines.append(
+            f"... and {len(rest)} more IMU gaps bridged along the route, ending between "
+            f"{rest[0]['gap_bridge_end_s']:.1f} and {rest[-1]['gap_bridge_end_s']:.1f} s (the "
+            f"position moved {max(e['gap_bridge_moved_m'] for e in rest):.1f} m at most, the "
+            f"heading turned {max(abs(e['gap_bridge_turn_deg']) for e in rest):.1f} deg at most)"
+        )
+    return tuple(lines)
 
 
 def approach_warnings(
@@ -984,10 +1001,14 @@ class Driver:
     def after_match(self, rec: MatchRecord, x_after: F64, aux: F64) -> None:
         """Follow the vehicle along the route after an accepted match."""
         if rec.accepted:
-            tr = self.track
-            pred = self._predicted_s(aux)
-            tr.s = route_arc_length(self.route, x_after[:2], s_guess=pred, params=self.p)
-            tr.s_dist = float(aux[A_DIST])
+            self._placed_on_route(x_after, aux)
+
+    def _placed_on_route(self, x: F64, aux: F64) -> None:
+        """Where on the route the vehicle is, after a route update placed it there."""
+        tr = self.track
+        pred = self._predicted_s(aux)
+        tr.s = route_arc_length(self.route, x[:2], s_guess=pred, params=self.p)
+        tr.s_dist = float(aux[A_DIST])
 
     def _attempt_live(self) -> None:
         f = self.filt
@@ -1232,6 +1253,7 @@ class Driver:
             )
         if self.twin is not None:
             self.twin = self._twin(float(f.aux[A_TIME]))
+        self._placed_on_route(f.x, f.aux)
         return {
             "gap_bridge_end_s": end - self.log.t_start,
             "gap_bridge_along_m": travelled,

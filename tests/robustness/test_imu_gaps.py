@@ -10,7 +10,7 @@ import numpy as np
 import pytest
 from numpy.typing import NDArray
 
-from estimator.evaluation.metrics import deviation_series
+from estimator.evaluation.metrics import deviation_series, method_metrics
 from estimator.filter.kernel import (
     GAP_TILT_VAR,
     GAP_YAW_VAR,
@@ -125,7 +125,8 @@ def test_a_log_cut_into_many_gaps_gets_a_few_warning_lines(long_tunnel: Inputs) 
     gap_starts = np.flatnonzero(np.diff(cut.t) > 5.0)
     n = len(gap_starts)
     assert n > 50
-    run = run_methods(gapped, Params(), methods=("baseline",))["baseline"]
+    runs = run_methods(gapped, Params(), methods=("baseline", "proposed"))
+    run = runs["baseline"]
     named = [w for w in run.warnings if w.startswith("IMU gap ")]
     (rest,) = [w for w in run.warnings if "more IMU gaps" in w]
     assert len(named) == IMU_GAPS_NAMED - 1
@@ -142,6 +143,17 @@ def test_a_log_cut_into_many_gaps_gets_a_few_warning_lines(long_tunnel: Inputs) 
     not_realigned = int(rest.split("GNSS track, ")[1].split(" not)")[0])
     assert realigned > 0 and not_realigned > 0  # open sky and tunnel
     assert realigned + not_realigned == n - IMU_GAPS_NAMED + 1
+    # in the tunnel routefuse bridges gap after gap along the route, each bridge placing the
+    # vehicle on it for the next, and says so in a few lines too
+    bridged = [w for w in runs["proposed"].warnings if "bridged along the route" in w]
+    assert len(bridged) == IMU_GAPS_NAMED
+    assert bridged[-1].startswith("... and ")
+    assert gapped.route is not None
+    rmse = {
+        m: method_metrics(r, gapped.route, gapped.log).truth.rmse_h_err_m  # type: ignore[union-attr]
+        for m, r in (("baseline", run), ("proposed", runs["proposed"]))
+    }
+    assert rmse["proposed"] < 0.1 * rmse["baseline"]
 
 
 @pytest.mark.parametrize("n", [1, IMU_GAPS_NAMED, IMU_GAPS_NAMED + 1, 5000])
