@@ -236,12 +236,12 @@ def _bridge(x: F64, P: F64, aux: F64, t: float, wheel_t: F64, wheel_v: F64) -> N
     that distance (times the wheel scale the filter estimated) along the last horizontal
     velocity's direction (and the DR track with it), set the speed to the wheels' at the gap's
     end, and add to the position variance what a road turning anywhere in the gap could put it
-    off, half the distance each way. On a log
-    without wheel speed the last velocity carries it instead, and the variance adds the
-    speed's own uncertainty over the gap (:data:`GAP_VEL_VAR`): held, the position would stay
-    behind by the whole gap's travel while claiming the sigma it had before it. Where the
-    log's wheels fall silent with the IMU (the recording paused), and for a vehicle standing
-    still, the position is held; the next fix re-places it."""
+    off, half the distance each way. On a log without wheel speed the last velocity carries it
+    instead, and the variance adds the speed's own uncertainty over the gap
+    (:data:`GAP_VEL_VAR`): held, the position would stay behind by the whole gap's travel while
+    claiming the sigma it had before it. Where the log's wheels fall silent with the IMU (the
+    recording paused), and for a vehicle standing still, the position is held; the next fix
+    re-places it."""
     speed = math.hypot(x[X_VEL], x[X_VEL + 1])
     if speed < 0.1:
         return
