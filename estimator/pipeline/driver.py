@@ -394,6 +394,9 @@ class _Track:
     """distance travelled at the end of the track the bias was learned from"""
     bridged_gap_end: float = -math.inf
     """the end of the last IMU gap :meth:`Driver._bridged_on_route` looked at"""
+    placed_dist: float = -math.inf
+    """distance travelled when a route update last placed the vehicle on the route (an accepted
+    match or a bridged gap; not the projection at an outage's start)"""
 
 
 class Driver:
@@ -1008,7 +1011,7 @@ class Driver:
         tr = self.track
         pred = self._predicted_s(aux)
         tr.s = route_arc_length(self.route, x[:2], s_guess=pred, params=self.p)
-        tr.s_dist = float(aux[A_DIST])
+        tr.s_dist = tr.placed_dist = float(aux[A_DIST])
 
     def _attempt_live(self) -> None:
         f = self.filt
@@ -1190,8 +1193,8 @@ class Driver:
             return {}
         before = rows[k - 1]
         dist_before = float(before[O_DIST])
-        if dist_before - tr.s_dist > self.p.window.length_m:
-            return {}
+        if dist_before - tr.placed_dist > self.p.window.length_m:
+            return {}  # nothing placed the vehicle on the route just before the gap
         wheels = self.inp.wheel_t
         span = float(rows[k, O_T] - before[O_T])
         if (

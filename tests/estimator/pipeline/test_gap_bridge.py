@@ -200,3 +200,19 @@ def test_many_bridged_gaps_get_a_few_warning_lines() -> None:
     )
     few = gap_bridge_warnings(records[:IMU_GAPS_NAMED], 0.0)  # type: ignore[arg-type]
     assert len(few) == IMU_GAPS_NAMED and not any("more IMU gaps" in w for w in few)
+
+
+def test_a_gap_before_any_route_update_is_not_bridged() -> None:
+    """A gap from 0.8 s into the outage, before its first attempt: nothing placed the vehicle on
+    the route yet (the outage's start projects it there, but a route another road would be
+    projected onto too), so the bridge trusts nothing and leaves the gap to the wheels."""
+    spiral = open_inputs(SAMPLES / "spiral_tunnel.mcap", SAMPLES / "spiral_tunnel.route.geojson")
+    early = without_imu(spiral, 122.0, 142.0)
+    r = run_methods(early, Params(), methods=("proposed",))["proposed"]
+    t0 = early.log.t_start
+    assert not any(m.t - t0 < 122.0 for m in r.matches)
+    assert not _bridged(r)
+    later = without_imu(spiral, 124.0, 144.0)  # after the outage's first accepted attempt
+    r = run_methods(later, Params(), methods=("proposed",))["proposed"]
+    assert any(m.accepted and m.t - t0 < 124.0 for m in r.matches)
+    assert len(_bridged(r)) == 1
