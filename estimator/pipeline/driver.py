@@ -395,8 +395,9 @@ class _Track:
     bridged_gap_end: float = -math.inf
     """the end of the last IMU gap :meth:`Driver._bridged_on_route` looked at"""
     placed_dist: float = -math.inf
-    """distance travelled when a route update last placed the vehicle on the route (an accepted
-    match or a bridged gap; not the projection at an outage's start)"""
+    """distance travelled when the vehicle was last known on the route: an accepted match, a
+    bridged gap, or an outage's start whose approach found the route the road driven
+    (:meth:`Driver._portal_on_route`)"""
 
 
 class Driver:
@@ -694,6 +695,20 @@ class Driver:
                 tr.bias = unapplied_considered(
                     tr.bias, tied=self.p.extensions.unapplied_bias_lane_tie
                 )
+        if self._portal_on_route(rows, used, t_a, s_last):
+            tr.placed_dist = float(aux[A_DIST])
+
+    def _portal_on_route(
+        self, rows: F64, used: NDArray[np.bool_], t_a: float, s_last: float
+    ) -> bool:
+        """The GNSS-aided approach found the road driven where the route (moved back by the map
+        bias) draws it: a map bias learned and not refused as another road, or, with none
+        learned, the offset from the route near the portal within ``offset.max_offset_m``."""
+        bias = self.track.bias
+        if bias is not None and np.isfinite(bias.chi2):
+            return bias.refused is None
+        lane = self._offset_near_portal(rows, used, t_a, s_last)
+        return math.isfinite(lane) and abs(lane) <= self.p.offset.max_offset_m
 
     def _offset_near_portal(
         self,
@@ -1194,7 +1209,7 @@ class Driver:
         before = rows[k - 1]
         dist_before = float(before[O_DIST])
         if dist_before - tr.placed_dist > self.p.window.length_m:
-            return {}  # nothing placed the vehicle on the route just before the gap
+            return {}  # nothing placed the vehicle on the route up to a window before the gap
         wheels = self.inp.wheel_t
         span = float(rows[k, O_T] - before[O_T])
         if (
