@@ -1121,7 +1121,8 @@ class Driver:
     def gaps_ended(self, t: float) -> F64:
         """The ends of the IMU gaps that ended in the current outage by ``t``."""
         ends = self.gap_ends
-        return ends[(ends > self.track.t_start) & (ends <= t)]
+        lo = np.searchsorted(ends, self.track.t_start, side="right")
+        return ends[lo : np.searchsorted(ends, t, side="right")]
 
     def _reacquired(self, rec: MatchRecord) -> MatchRecord:
         """``rec`` accepted as a re-anchor after an IMU gap in this outage
@@ -1171,8 +1172,9 @@ class Driver:
         then showing the bridged state: the route and the wheels' distance are known the moment
         the IMU comes back, not only at the next attempt."""
         f = self.filt
-        ends = self.gap_ends
-        for end in ends[(ends > max(f.aux[A_TIME], self.track.t_start)) & (ends <= t)]:
+        for end in self.gaps_ended(t):
+            if end <= f.aux[A_TIME]:
+                continue
             f.advance(float(end))
             bridged = self._bridged_on_route()
             if bridged:
@@ -1332,7 +1334,7 @@ def row_after_gap(rows: F64, end: float) -> int:
     """The first of the output ``rows`` at or after an IMU gap's ``end`` (the first IMU sample
     after it, where the kernel has bridged it and writes a row); the row before it is the last
     before the gap. The last row if none is."""
-    return min(int(np.searchsorted(rows[:, O_T], end, side="left")), len(rows) - 1)
+    return min(search_right(rows[:, O_T], float(np.nextafter(end, -np.inf))), len(rows) - 1)
 
 
 def dr_window(out: F64, n_out: int, x: F64, aux: F64, length_m: float) -> F64:
