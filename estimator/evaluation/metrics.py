@@ -391,6 +391,13 @@ def map_bias_notes(run: Run) -> list[str]:
             continue
         bias, n = rec.map_bias, rec.fit.normal
         t = np.array([n[1], -n[0]])
+        if not bias.applied and not np.all(np.isfinite(bias.learned)):
+            notes.append(
+                f"map bias for the outage at {a - run.t0:.1f} s: nothing measured (too little "
+                "GNSS-good driving before it, or its GNSS track does not follow the route); "
+                "the route taken as right"
+            )
+            continue
         learned = bias.learned if np.all(np.isfinite(bias.learned)) else bias.offset
         along, across = float(t @ learned), float(n @ learned)
         measured = (

@@ -194,7 +194,12 @@ def run(
         + reacquire_warnings(driver.records, log.t_start)
         + gap_bridge_warnings(driver.records, log.t_start)
         + approach_warnings(driver.checkpoints, driver.inp.degraded, log.t_start, p)
-        + unplaced_along_warnings(epochs, driver.records, inputs.degraded, log.t_start),
+        + unplaced_along_warnings(epochs, driver.records, inputs.degraded, log.t_start)
+        + (
+            far_route_warnings(epochs, route, inputs.degraded, log.t_start, p)
+            if matching and route is not None
+            else ()
+        ),
         _reuse=state,
     )
 
@@ -311,6 +316,38 @@ def approach_warnings(
             "dead-reckoned"
         )
     return tuple(lines)
+
+
+def far_route_warnings(
+    epochs: Epochs,
+    route: Route,
+    degraded: Sequence[tuple[float, float]],
+    t_start: float,
+    p: Params,
+) -> tuple[str, ...]:
+    """One line when the route is farther from the vehicle at the start of an outage (its last
+    GNSS-aided position) than a route update may move it (``gates.max_correction_m``): no match
+    can be accepted there, and the outage is dead-reckoned. A route within the few kilometres
+    :func:`~estimator.pipeline.inputs.open_inputs` lets through may still be the wrong one,
+    or drawn elsewhere; without this line the run would read as a right route that matched
+    nothing."""
+    cap = p.gates.max_correction_m
+    far: list[tuple[float, float]] = []
+    for a, _ in degraded:
+        k = min(max(int(np.searchsorted(epochs.t, a, side="right")) - 1, 0), len(epochs.t) - 1)
+        d = float(route.project(epochs.position[k : k + 1, :2]).distance[0])
+        if d > cap:
+            far.append((a, d))
+    if not far:
+        return ()
+    (a, d), rest = far[0], far[1:]
+    more = f" (and of {len(rest)} more, up to {max(x for _, x in rest):.0f} m)" if rest else ""
+    return (
+        f"the route is {d:.0f} m from the vehicle at the start of the outage at "
+        f"{a - t_start:.1f} s{more}, farther than a route update may move it "
+        f"(gates.max_correction_m {cap:g} m): no match can be accepted, the outage is "
+        "dead-reckoned. The wrong route for this drive?",
+    )
 
 
 UNPLACED_SIGMA_M = 20.0
