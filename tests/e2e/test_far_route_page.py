@@ -23,7 +23,9 @@ VIEWPORT = {"width": 1400, "height": 1100}
 
 def _moved_north(geometry: dict, dlat: float) -> dict:
     def move(c):
-        return [c[0], c[1] + dlat, *c[2:]] if isinstance(c[0], float | int) else [move(x) for x in c]
+        if isinstance(c[0], float | int):
+            return [c[0], c[1] + dlat, *c[2:]]
+        return [move(x) for x in c]
 
     return {**geometry, "coordinates": move(geometry["coordinates"])}
 
