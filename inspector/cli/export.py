@@ -7,8 +7,9 @@ import argparse
 import sys
 from pathlib import Path
 
-from estimator.errors import ConfigError, RoutefuseError
+from estimator.errors import ConfigError
 from estimator.io import LOG_FORMATS_TEXT, ROUTE_FORMATS_TEXT, TopicChoice
+from inspector.cli.checks import check_log, check_log_specs, route_for
 from inspector.cli.options import (
     add_outage_option,
     add_param_options,
@@ -27,7 +28,11 @@ HELP = (
 
 def add_arguments(parser: argparse.ArgumentParser) -> None:
     parser.add_argument("log", nargs="?", metavar="LOG", help=LOG_FORMATS_TEXT)
-    parser.add_argument("--route", metavar="ROUTE", help=f"route file ({ROUTE_FORMATS_TEXT})")
+    parser.add_argument(
+        "--route",
+        metavar="ROUTE",
+        help=f"route file ({ROUTE_FORMATS_TEXT}; default: LOG's <name>.route.* beside it)",
+    )
     parser.add_argument(
         "--batch",
         metavar="DIR_OR_GLOB",
@@ -118,9 +123,17 @@ class _Progress:
         self.last, self.stage = line, stage
 
 
+def signed(value: float, digits: int = 3) -> str:
+    """A difference with its sign, ``+0.012`` / ``-0.012``; one that rounds to zero (-0.0, or
+    -0.0004 at 3 digits) is ``0.000``, without a sign."""
+    text = f"{value:+.{digits}f}"
+    return text[1:] if float(text) == 0.0 else text
+
+
 def _compare(
     args: argparse.Namespace,
     log: Path,
+    route: Path,
     out: Path,
     outages: tuple[tuple[float, float], ...],
     topics: TopicChoice,
@@ -130,7 +143,7 @@ def _compare(
     set_a, set_b = (Path(p).expanduser() for p in args.compare)
     comparison, files = export_comparison(
         log,
-        Path(args.route).expanduser(),
+        route,
         out,
         set_a,
         set_b,
@@ -141,7 +154,7 @@ def _compare(
     )
     for label, va, vb in comparison.metrics:
         if va is not None and vb is not None:
-            print(f"{label}: A {va:.3f}, B {vb:.3f} (B - A {vb - va:+.3f})")
+            print(f"{label}: A {va:.3f}, B {vb:.3f} (B - A {signed(vb - va)})")
     print(
         f"accepted A {comparison.accepted[0]} / {comparison.attempts[0]}, "
         f"B {comparison.accepted[1]} / {comparison.attempts[1]}; "
@@ -180,6 +193,8 @@ def execute(args: argparse.Namespace) -> int:
             )
         from inspector.fleet.engine import TerminalProgress
 
+        check_log_specs([args.batch])
+
         batch = export_batch(
             find_logs(args.batch),
             out,
@@ -197,20 +212,19 @@ def execute(args: argparse.Namespace) -> int:
         return 2 if batch.failed else 0
     if args.log is None:
         raise ConfigError(None, "give a LOG (with --route ROUTE) or --batch DIR_OR_GLOB")
-    if args.route is None:
-        raise ConfigError(args.log, "give the route with --route ROUTE")
-    log = Path(args.log).expanduser()
-    if not log.exists():
-        raise RoutefuseError(log, "no such file or folder")
+    # the log's own problem first, then the route's (given, or the one beside the log as
+    # ``run`` and ``serve`` find it)
+    log = check_log(args.log)
+    route = route_for(log, args.route)
     if args.compare is not None:
-        return _compare(args, log, out, outages, topics)
+        return _compare(args, log, route, out, outages, topics)
 
     def report(stage: str, fraction: float) -> None:
         progress(0, 1, log, stage, fraction)
 
     result = export_log(
         log,
-        Path(args.route).expanduser(),
+        route,
         out,
         params=params,
         method=args.method,

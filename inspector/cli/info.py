@@ -6,6 +6,7 @@ import argparse
 from pathlib import Path
 
 from estimator.io import LOG_FORMATS_TEXT, ROUTE_FORMATS_TEXT, route_format
+from inspector.cli.checks import check_log, check_route
 from inspector.cli.options import add_topic_options
 
 NAME = "info"
@@ -54,9 +55,11 @@ def execute(args: argparse.Namespace) -> int:
             return 0
         print(format_summary(summarize(Inputs(log, None, frame))))
         return 0
+    # the log's own problem first, then a folder or missing file given as the route
+    log_path = check_log(args.log)
     inputs = open_inputs(
-        Path(args.log),
-        None if args.route is None else Path(args.route),
+        log_path,
+        check_route(args.route),
         topics=topics,
         route_feature=args.route_feature,
     )

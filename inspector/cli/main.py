@@ -27,6 +27,36 @@ def _modules() -> list[ModuleType]:
     return [importlib.import_module(name) for name in COMMANDS]
 
 
+def version() -> str:
+    """The installed distribution's version; ``unknown (not installed)`` when the code runs from
+    a source tree that was never installed."""
+    from importlib.metadata import PackageNotFoundError
+    from importlib.metadata import version as dist_version
+
+    try:
+        return dist_version("routefuse")
+    except PackageNotFoundError:
+        return "unknown (not installed)"
+
+
+class _VersionAction(argparse.Action):
+    """``--version``: ``routefuse X.Y.Z`` on stdout, exit 0 (the version looked up only when
+    asked, so building the parser stays light)."""
+
+    def __init__(self, option_strings: Sequence[str], dest: str, help: str | None = None) -> None:
+        super().__init__(option_strings, dest, nargs=0, default=argparse.SUPPRESS, help=help)
+
+    def __call__(
+        self,
+        parser: argparse.ArgumentParser,
+        namespace: argparse.Namespace,
+        values: object,
+        option_string: str | None = None,
+    ) -> None:
+        print(f"routefuse {version()}")
+        parser.exit(0)
+
+
 def build_parser() -> argparse.ArgumentParser:
     parser = argparse.ArgumentParser(
         prog="routefuse",
@@ -35,6 +65,9 @@ def build_parser() -> argparse.ArgumentParser:
     )
     parser.add_argument(
         "--debug", action="store_true", help="show the full traceback on unexpected errors"
+    )
+    parser.add_argument(
+        "--version", action=_VersionAction, help="print routefuse's version and exit"
     )
     sub = parser.add_subparsers(dest="command", metavar="COMMAND", required=True)
     for mod in _modules():

@@ -14,6 +14,7 @@ from typing import TYPE_CHECKING, Any
 from estimator.errors import RoutefuseError
 from estimator.io import LOG_FORMATS_TEXT, ROUTE_FORMATS_TEXT, TopicChoice
 from estimator.params import Method
+from inspector.cli.checks import check_log, check_output_file, route_for
 from inspector.cli.options import (
     add_outage_option,
     add_param_options,
@@ -145,18 +146,6 @@ _CSV_HEADER = [
 ]  # fmt: skip
 
 
-def _route_beside(log: Path) -> Path:
-    """The route named after the log beside it, as ``serve`` finds it, or a one-line error."""
-    from estimator.io import route_beside
-
-    found = route_beside(log)
-    if found is None:
-        raise RoutefuseError(
-            log, "no route given and none beside the log (<name>.route.*): give one with --route"
-        )
-    return found
-
-
 def execute(args: argparse.Namespace) -> int:
     # imported here, not above: building the parser (``routefuse --help``) stays light
     from estimator.evaluation import format_table, match_summary, method_metrics
@@ -166,8 +155,13 @@ def execute(args: argparse.Namespace) -> int:
     params = params_from_args(args)
     outages = [parse_outage(o) for o in args.outage]
     methods: list[Method] = list(dict.fromkeys(args.method or ("baseline", "proposed")))
+    # the inputs' and outputs' problems before any work: the log's own first, then the route's
+    # (given or beside the log), then the output files' folders
+    route_path = route_for(check_log(args.log), args.route)
+    for out in (args.json, args.csv):
+        if out is not None:
+            check_output_file(out)
     progress = _Progress(enabled=not args.quiet)
-    route_path = Path(args.route) if args.route is not None else _route_beside(Path(args.log))
     inputs = open_inputs(
         Path(args.log),
         route_path,

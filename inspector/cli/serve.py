@@ -15,6 +15,7 @@ from typing import TYPE_CHECKING, Literal
 
 from estimator.errors import RoutefuseError
 from estimator.io import route_beside
+from inspector.cli.checks import check_log, route_for
 from inspector.cli.options import (
     add_outage_option,
     add_param_options,
@@ -116,15 +117,11 @@ def resolve_inputs(log: str | None, route: str | None) -> tuple[Path, Path]:
             raise RoutefuseError(log_path, "no such file or folder") from None
         except OSError as exc:
             raise RoutefuseError(log_path, f"cannot open it ({exc.strerror or exc})") from None
-    if route is None:
-        found = route_beside(log_path)
-        if found is None:
-            raise RoutefuseError(log_path, "no route beside the log; give one with --route")
-        route_path = found
-    else:
-        route_path = Path(route).expanduser()
-        if not route_path.is_file():
-            raise RoutefuseError(route_path, "no such file")
+    if route is None and route_beside(log_path) is None:
+        # the log's own problem first (a bad log with its route beside it is the inspector's to
+        # report, and the server stays up for another one)
+        check_log(log_path)
+    route_path = route_for(log_path, route)
     return log_path.resolve(), route_path.resolve()
 
 

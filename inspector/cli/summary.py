@@ -16,6 +16,11 @@ from estimator.nav.frames import LocalFrame
 from estimator.pipeline.inputs import Inputs, route_distances
 
 MIN_OUTAGE_S = 1.0
+ESTIMATED_RATE_NOTE = (
+    "  rate: 1 / median interval between messages; ~: count / span (a topic routefuse does not "
+    "decode)"
+)
+"""The line under the topic table when a rate is only count / span."""
 SMOOTHING_FIXES = 5
 
 
@@ -27,7 +32,8 @@ class TopicLine:
     rate_hz: float
     role: str
     rate_measured: bool
-    """False when the rate is only count / span (a topic the estimator does not read)"""
+    """True: 1 / the median interval between its messages; False: only count / span (a topic
+    the estimator does not read, so its times are not decoded), shown with ``~``"""
 
 
 @dataclass(frozen=True)
@@ -59,7 +65,12 @@ class LogSummary:
 
 
 def _rate(t: NDArray[np.float64]) -> float:
-    return (len(t) - 1) / (t[-1] - t[0]) if len(t) > 1 and t[-1] > t[0] else float("nan")
+    """The stream's own rate: 1 / the median interval between consecutive messages, so an
+    outage (a GNSS receiver at 5 Hz silent for two minutes) or a pause does not lower it; NaN
+    without two messages at distinct times."""
+    dt = np.diff(t)
+    dt = dt[dt > 0]
+    return 1.0 / float(np.median(dt)) if len(dt) else float("nan")
 
 
 def gnss_outages(log: Log) -> tuple[tuple[tuple[float, float], ...], float]:
@@ -179,6 +190,8 @@ def format_summary(s: LogSummary) -> str:
             f"  {t.topic:<{width}}  {t.msgtype:<{twidth}}  {t.count:>7}  {rate:>10}  "
             f"{t.role or '(unused)'}"
         )
+    if any(not t.rate_measured for t in s.topics):
+        out.append(ESTIMATED_RATE_NOTE)
     out.append("")
     out.append(f"GNSS      {s.gnss_valid} valid of {s.gnss_fixes} fixes")
     if s.outages:

@@ -9,6 +9,7 @@ from typing import Any
 
 from estimator.errors import ConfigError
 from estimator.io import LOG_FORMATS_TEXT
+from inspector.cli.checks import check_log_specs
 from inspector.cli.options import add_outage_option, add_topic_options, parse_outage
 
 NAME = "sweep"
@@ -120,6 +121,7 @@ def execute(args: argparse.Namespace) -> int:
 
     if args.workers is not None and args.workers < 1:
         raise ConfigError("--workers", f"{args.workers}: at least one worker")
+    check_log_specs(args.logs)  # a missing path is named as missing, not as "no logs found"
     base = with_values(Params(), parse_assignments(args.set), "--set")
     outages = tuple(parse_outage(o) for o in args.outage)
     plan = SweepPlan(

@@ -8,6 +8,8 @@ import subprocess
 import sys
 from pathlib import Path
 
+import pytest
+
 REPO = Path(__file__).resolve().parents[3]
 CONSOLE = "from inspector.cli.main import console; console()"
 
@@ -36,3 +38,28 @@ def test_an_error_through_the_console_is_one_line_and_exit_2(tmp_path: Path) -> 
     done = _console("info", str(tmp_path / "missing.mcap"), cwd=tmp_path)
     assert done.returncode == 2
     assert done.stderr.count("\n") == 1 and "missing.mcap" in done.stderr
+
+
+def test_version_prints_the_installed_version_and_exits_0(tmp_path: Path) -> None:
+    from importlib.metadata import version
+
+    done = _console("--version", cwd=tmp_path)
+    assert done.returncode == 0 and done.stderr == ""
+    assert done.stdout == f"routefuse {version('routefuse')}\n"
+
+
+def test_version_without_an_installed_distribution(
+    monkeypatch: pytest.MonkeyPatch, capsys: pytest.CaptureFixture[str]
+) -> None:
+    import importlib.metadata
+
+    from inspector.cli.main import main
+
+    def not_installed(name: str) -> str:
+        raise importlib.metadata.PackageNotFoundError(name)
+
+    monkeypatch.setattr(importlib.metadata, "version", not_installed)
+    with pytest.raises(SystemExit) as exit_:
+        main(["--version"])
+    assert exit_.value.code == 0
+    assert capsys.readouterr().out == "routefuse unknown (not installed)\n"

@@ -10,6 +10,7 @@ from pathlib import Path
 
 import pytest
 
+from estimator.errors import RoutefuseError
 from estimator.sim import simulate
 from inspector.cli.main import main
 
@@ -92,7 +93,6 @@ def test_batch_glob(bag, tmp_path, capsys):
     ("extra", "message"),
     [
         ([], "give a LOG"),
-        (["LOG"], "--route"),
         (["LOG", "--route", "R", "--batch", "D"], "either"),
         (["LOG", "--route", "ROUTE", "--outage", "30:20"], "END must be after START"),
         (["LOG", "--route", "ROUTE", "--outage", "abc"], "START:END"),
@@ -158,3 +158,93 @@ def test_subtract_lane_offset_is_offered_and_every_table_says_which_measure(tmp_
         ["export", "--batch", str(tmp_path), "--out", str(tmp_path / "b"), "--subtract-lane-offset"]
     )
     assert code == 2
+
+
+@pytest.fixture
+def captured_export(monkeypatch):
+    """``export_log`` replaced: records the route it was given, then stops the command."""
+    import inspector.export
+
+    routes: list[Path] = []
+
+    def fake_export_log(log, route, out, **kwargs):
+        routes.append(route)
+        raise RoutefuseError(None, "stopped before exporting")
+
+    monkeypatch.setattr(inspector.export, "export_log", fake_export_log)
+    return routes
+
+
+def test_without_route_the_one_beside_the_log_is_used(bag, tmp_path, capsys, captured_export):
+    """As ``run`` and ``serve`` do; none beside it is ``run``'s one line."""
+    log, route = bag
+    assert main(["export", str(log), "--out", str(tmp_path / "o")]) == 2
+    assert captured_export == [route]
+    assert "stopped before exporting" in capsys.readouterr().err
+    lone = tmp_path / "lone.mcap"
+    shutil.copy(log, lone)
+    assert main(["export", str(lone), "--out", str(tmp_path / "o")]) == 2
+    assert capsys.readouterr().err == (
+        f"routefuse: error: {lone}: no route given and none beside the log (<name>.route.*): "
+        "give one with --route\n"
+    )
+    assert captured_export == [route]
+
+
+def test_a_bad_log_and_a_folder_route_are_named(bag, tmp_path, capsys, captured_export):
+    bad = tmp_path / "bad.foo"
+    bad.write_text("x")
+    assert main(["export", str(bad), "--out", str(tmp_path / "o")]) == 2
+    assert "bad.foo: unknown log format '.foo'" in capsys.readouterr().err
+    log, _ = bag
+    assert main(["export", str(log), "--route", str(tmp_path), "--out", str(tmp_path / "o")]) == 2
+    err = capsys.readouterr().err
+    assert err == f"routefuse: error: {tmp_path}: is a folder, expected a route file\n"
+    assert captured_export == []
+
+
+def test_a_missing_batch_folder_is_named_missing(tmp_path, capsys):
+    missing = tmp_path / "no-such-folder"
+    assert main(["export", "--batch", str(missing), "--out", str(tmp_path / "o")]) == 2
+    assert capsys.readouterr().err == f"routefuse: error: {missing}: no such file or folder\n"
+
+
+@pytest.mark.parametrize(
+    ("value", "text"),
+    [(-0.0, "0.000"), (-4e-4, "0.000"), (-5e-17, "0.000"), (4e-4, "0.000"), (0.0, "0.000"),
+     (-6e-4, "-0.001"), (0.0125, "+0.013"), (-1.5, "-1.500")],
+)  # fmt: skip
+def test_signed_differences_have_no_negative_zero(value, text):
+    from inspector.cli.export import signed
+
+    assert signed(value) == text
+
+
+def test_compare_prints_no_negative_zero_and_uses_the_route_beside(
+    bag, tmp_path, capsys, monkeypatch
+):
+    """B - A of two equal figures whose float difference is -5.6e-17 prints 0.000."""
+    from types import SimpleNamespace
+
+    import inspector.export.compare
+
+    log, route = bag
+    given: list[Path] = []
+
+    def fake_comparison(log_path, route_path, out, set_a, set_b, **kwargs):
+        given.append(route_path)
+        comparison = SimpleNamespace(
+            metrics=[("RMSE [m]", 0.1 + 0.2, 0.3), ("max [m]", 1.0, 1.25)],
+            accepted=(3, 3),
+            attempts=(5, 5),
+            changed=(),
+        )
+        return comparison, ()
+
+    monkeypatch.setattr(inspector.export.compare, "export_comparison", fake_comparison)
+    argv = ["export", str(log), "--out", str(tmp_path / "o"), "--compare", "a.toml", "b.toml"]
+    assert main(argv) == 0
+    out = capsys.readouterr().out.splitlines()
+    assert out[0] == "RMSE [m]: A 0.300, B 0.300 (B - A 0.000)"
+    assert out[1] == "max [m]: A 1.000, B 1.250 (B - A +0.250)"
+    assert given == [route]

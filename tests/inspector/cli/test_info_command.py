@@ -196,3 +196,41 @@ def test_real_car_with_route(shared_data: Path, capsys) -> None:
     assert code == 0
     assert "1011.3 m from ground truth" in out and "1003.8 m from wheel-speed integral" in out
     assert "1411.3 m, 6 vertices" in out
+
+
+def test_rate_is_the_streams_own_not_lowered_by_an_outage(tmp_path: Path, capsys) -> None:
+    """10 Hz GNSS with 5 s without a message: 10.0 Hz (1 / median interval), not the 9.2 Hz of
+    550 fixes over 59.9 s; every rate decoded, so no ``~`` and no note about it."""
+    code, out, _ = _run(capsys, _outage_log(tmp_path / "drive.mcap"))
+    assert code == 0
+    rows = {line.split()[0]: line.split()[1:] for line in out.splitlines() if "/msg/" in line}
+    assert rows["/gnss/fix"] == ["sensor_msgs/msg/NavSatFix", "550", "10.0", "Hz", "gnss"]
+    assert "~" not in out and "median interval" not in out
+
+
+def test_monaco_gnss_rate_is_the_receivers_5_hz(capsys) -> None:
+    """761 fixes at 5 Hz around a 116 s outage in 268 s: 5.0 Hz (count / span gave 2.8); the
+    topic the estimator does not decode keeps its ``~`` count / span, explained under the table."""
+    log = Path(__file__).resolve().parents[3] / "sample_logs" / "monaco_tunnel.mcap"
+    if not log.exists():
+        pytest.skip(f"{log} is not generated")
+    code, out, _ = _run(capsys, log)
+    assert code == 0
+    lines = out.splitlines()
+    rows = {line.split()[0]: line.split()[1:] for line in lines if "/msg/" in line}
+    assert rows["/gnss/fix"][1:] == ["761", "5.0", "Hz", "gnss"]
+    assert rows["/ground_truth/odom"][1:] == ["2680", "~10.0", "Hz", "truth_pose"]
+    note = lines.index(
+        "  rate: 1 / median interval between messages; ~: count / span (a topic routefuse does "
+        "not decode)"
+    )
+    assert "/msg/" in lines[note - 1] and lines[note + 1] == ""
+
+
+def test_route_that_is_a_folder_or_missing(tmp_path: Path, capsys) -> None:
+    log = _outage_log(tmp_path / "drive.mcap")
+    code, out, err = _run(capsys, log, "--route", tmp_path)
+    assert code == 2 and out == ""
+    assert err == f"routefuse: error: {tmp_path}: is a folder, expected a route file\n"
+    code, _, err = _run(capsys, tmp_path / "nothing.foo", "--route", tmp_path)
+    assert code == 2 and "nothing.foo: no such file or folder" in err  # the log's problem first

@@ -172,3 +172,75 @@ def test_without_route_the_one_beside_the_log_is_used(bag, tmp_path, capsys):
         f"routefuse: error: {lone}: no route given and none beside the log (<name>.route.*): "
         "give one with --route"
     ]
+
+
+def _bad_logs(tmp_path: Path) -> dict[str, tuple[Path, str]]:
+    """Logs with no route beside them, each with the problem ``run`` must name."""
+    empty = tmp_path / "empty.mcap"
+    empty.write_bytes(b"")
+    noise = tmp_path / "noise.mcap"
+    noise.write_bytes(bytes(range(256)) * 4)
+    folder = tmp_path / "folder"
+    folder.mkdir()
+    unknown = tmp_path / "x.foo"
+    unknown.write_text("x\n")
+    return {
+        "missing": (tmp_path / "missing.mcap", "missing.mcap: no such file or folder"),
+        "empty": (empty, "empty.mcap: file is empty"),
+        "random bytes": (noise, "noise.mcap: not a ROS 2 bag / mcap file"),
+        "folder": (folder, "folder: folder is not a ROS 2 bag (it has no metadata.yaml)"),
+        "unknown extension": (unknown, "x.foo: unknown log format '.foo'"),
+    }
+
+
+BAD_LOGS = ["missing", "empty", "random bytes", "folder", "unknown extension"]
+
+
+@pytest.mark.parametrize("case", BAD_LOGS)
+def test_without_route_a_bad_log_is_reported_as_such(case, tmp_path, capsys):
+    """The log's own problem, not "no route given and none beside the log"."""
+    log, problem = _bad_logs(tmp_path)[case]
+    assert main(["run", str(log)]) == 2
+    err = capsys.readouterr().err
+    assert err.count("\n") == 1 and err.startswith("routefuse: error: "), err
+    assert problem in err and "--route" not in err, err
+
+
+def test_a_bag_folder_is_still_a_log_without_route(tmp_path, capsys):
+    """A ROS 2 bag folder passes the log check: what is missing is its route."""
+    bag_folder = tmp_path / "drive"
+    bag_folder.mkdir()
+    (bag_folder / "metadata.yaml").write_text("rosbag2_bagfile_information: {}\n")
+    assert main(["run", str(bag_folder)]) == 2
+    assert "no route given and none beside the log" in capsys.readouterr().err
+
+
+@pytest.fixture
+def no_estimation(monkeypatch):
+    """Fails the test if ``run`` starts loading the log."""
+    import estimator.pipeline
+
+    def refuse(*args, **kwargs):
+        raise AssertionError("the log was loaded before the arguments were checked")
+
+    monkeypatch.setattr(estimator.pipeline, "open_inputs", refuse)
+
+
+@pytest.mark.parametrize("option", ["--json", "--csv"])
+def test_output_folders_are_checked_before_running(bag, tmp_path, capsys, option, no_estimation):
+    log, route = bag
+    out = tmp_path / "no" / "such" / "x.out"
+    assert main(["run", str(log), "--route", str(route), option, str(out), "--quiet"]) == 2
+    err = capsys.readouterr().err
+    assert err == f"routefuse: error: {out}: cannot write: no folder {out.parent}\n"
+    assert main(["run", str(log), "--route", str(route), option, str(tmp_path), "--quiet"]) == 2
+    assert capsys.readouterr().err == f"routefuse: error: {tmp_path}: cannot write: is a folder\n"
+
+
+def test_a_folder_given_as_route_is_named_a_folder(bag, tmp_path, capsys, no_estimation):
+    log, _ = bag
+    folder = tmp_path / "routes"
+    folder.mkdir()
+    assert main(["run", str(log), "--route", str(folder)]) == 2
+    err = capsys.readouterr().err
+    assert err == f"routefuse: error: {folder}: is a folder, expected a route file\n"

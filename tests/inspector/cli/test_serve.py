@@ -55,7 +55,7 @@ def test_the_trap_route_gives_the_default_view_refusals_and_keeps_the_estimate()
 
 def test_route_is_found_beside_the_log_or_the_error_says_what_to_do(tmp_path):
     log = tmp_path / "drive.mcap"
-    log.write_bytes(b"x")
+    log.write_bytes(b"\x89MCAP0\r\n")  # an MCAP file's first bytes: a log by its shape
     with pytest.raises(RoutefuseError, match="give one with --route"):
         serve.resolve_inputs(str(log), None)
     (tmp_path / "drive.route.geojson").write_text("{}")
@@ -64,6 +64,17 @@ def test_route_is_found_beside_the_log_or_the_error_says_what_to_do(tmp_path):
         serve.resolve_inputs(str(tmp_path / "missing.mcap"), None)
     with pytest.raises(RoutefuseError, match="no such file"):
         serve.resolve_inputs(str(log), str(tmp_path / "nope.gpx"))
+    with pytest.raises(RoutefuseError, match="is a folder, expected a route file"):
+        serve.resolve_inputs(str(log), str(tmp_path))
+
+
+def test_without_route_beside_a_bad_log_is_reported_as_such(tmp_path):
+    """The log's own problem, not that it has no route; with a route beside it, a bad log is
+    the inspector's to report (the server stays up, see below)."""
+    log = tmp_path / "drive.foo"
+    log.write_bytes(b"x")
+    with pytest.raises(RoutefuseError, match=r"drive\.foo: unknown log format '\.foo'"):
+        serve.resolve_inputs(str(log), None)
 
 
 def test_data_dir_must_be_a_folder(tmp_path):
