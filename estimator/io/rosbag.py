@@ -6,20 +6,22 @@ rosbags' ``AnyReader`` (:mod:`estimator.io.decode`) and are repaired alike
 from __future__ import annotations
 
 import contextlib
+import dataclasses
 import stat
+import tempfile
 from collections.abc import Callable, Iterator
 from pathlib import Path
 from typing import TYPE_CHECKING, Any
 
 from estimator.errors import LogError
 from estimator.io.bounds import check_decompressed_size
+from estimator.io.recover import MCAP_MAGIC, Recovered, ends_whole, recover_mcap
 from estimator.io.topics import TopicChoice, topic_roles
 
 if TYPE_CHECKING:
     from estimator.log import Log
 
 ROS1_MAGIC = b"#ROSBAG V2.0\n"
-MCAP_MAGIC = b"\x89MCAP0\r\n"
 """First bytes of a ROS 1 bag and of an mcap file: checked before the (whole-file) content hash,
 so a large file of the wrong kind is refused at once."""
 ROS2_METADATA = "metadata.yaml"
@@ -130,13 +132,52 @@ class _RosbagsLog:
         return assemble(path, roles, raw, types, counts)
 
 
+@contextlib.contextmanager
+def _whole(path: Path, source: Path) -> Iterator[tuple[Path, Recovered | None]]:
+    """``source``, or where it was cut off, a complete copy of its whole records (in a
+    temporary folder for as long as it is read)."""
+    if ends_whole(source):
+        yield source, None
+        return
+    with tempfile.TemporaryDirectory(prefix="routefuse-recovered-") as folder:
+        with _reading(path, "ROS 2 bag / mcap file"):
+            recovered = recover_mcap(source, Path(folder) / source.name)
+        yield recovered.path, recovered
+
+
 class McapFile(_RosbagsLog):
-    """A bare ``.mcap`` file (ROS 2 messages, no bag folder around it)."""
+    """A bare ``.mcap`` file (ROS 2 messages, no bag folder around it). One that was cut off
+    (no footer) is read up to its last whole record (:mod:`estimator.io.recover`), with a
+    warning naming what was lost."""
 
     name = "mcap"
     wording = "a .mcap file"
     suffixes = (".mcap",)
     kind = "ROS 2 bag / mcap file"
+
+    def topics(self, path: Path, source: Path) -> dict[str, tuple[str, int]]:
+        check_decompressed_size(source)
+        with _whole(path, source) as (readable, _):
+            return super().topics(path, readable)
+
+    def read(
+        self,
+        path: Path,
+        source: Path,
+        choice: TopicChoice,
+        progress: Callable[[float], None] | None,
+    ) -> Log:
+        check_decompressed_size(source)
+        with _whole(path, source) as (readable, recovered):
+            log = super().read(path, readable, choice, progress)
+        if recovered is None:
+            return log
+        line = (
+            f"{path.name}: cut off (no mcap footer: a recording stopped mid-write?): read its "
+            f"{recovered.messages} whole messages, {log.t_end - log.t_start:.1f} s of log; the "
+            f"last {recovered.lost_bytes} bytes, a record cut in two, are lost"
+        )
+        return dataclasses.replace(log, warnings=(line, *log.warnings))
 
     def recognises(self, path: Path) -> bool:
         return not path.is_dir() and path.suffix.lower() == ".mcap" and not _in_bag_folder(path)

@@ -136,7 +136,6 @@ CASES: list[Case] = [
     ("zero-byte .mcap", lambda t, c: _zero(t, "empty.mcap"), "file is empty"),
     ("text file named .bag", lambda t, c: _text_file(t, "notes.bag"), "not a ROS 1 bag"),
     ("text file named .mcap", lambda t, c: _text_file(t, "notes.mcap"), "not a ROS 2 bag / mcap"),
-    ("truncated mcap", lambda t, c: _truncated(t, c, "mcap"), "truncated or corrupt"),
     ("truncated ROS 1 bag", lambda t, c: _truncated(t, c, "ros1"), "truncated or corrupt"),
     ("truncated sqlite3 bag", lambda t, c: _truncated(t, c, "sqlite3"), "truncated or corrupt"),
     ("mcap with a corrupt chunk", _corrupt_chunk, "truncated or corrupt"),
@@ -167,6 +166,18 @@ def test_cli_exits_2_with_one_line(
 ) -> None:
     path = corpus.build(name, make)
     assert_cli_error(capsys, cli_argv(command, path, route), path, problem)
+
+
+def test_a_truncated_mcap_loads_its_whole_records_with_a_warning(tmp_path: Path, corpus) -> None:
+    """A .mcap cut at two thirds (a recording stopped mid-write) is not refused: the records
+    before the cut are read (estimator.io.recover), finite, and a warning names the loss."""
+    path = corpus.build("truncated mcap", lambda t, c: _truncated(t, c, "mcap"))
+    log = load_log(path, cache_dir=tmp_path / "cache")
+    finite_log(log)
+    (line,) = [w for w in log.warnings if "cut off (no mcap footer" in w]
+    assert line.startswith(f"{path.name}: ")
+    whole = load_log(corpus.valid("mcap"), cache_dir=tmp_path / "cache")
+    assert 0 < log.t_end - log.t_start < whole.t_end - whole.t_start
 
 
 def test_no_valid_fix_is_a_map_frame_error(tmp_path: Path, capsys, route: Path) -> None:
