@@ -18,6 +18,7 @@ from inspector.app.match import match_markdown
 from inspector.app.widgets import markdown_text
 from inspector.export.compare import ChangedVerdict, changed_verdicts
 from inspector.layers import ACCEPTED, REJECTED
+from inspector.numbers import signed
 from inspector.scene_data import polyline_segments
 
 if TYPE_CHECKING:
@@ -45,7 +46,7 @@ def compare_markdown(a: Session, b: Session) -> str:
     rows = ["| quantity | A | B | B - A |", "|---|---:|---:|---:|"]
     for (label, _, va), (_, _, vb) in zip(a.metrics, b.metrics, strict=False):
         try:
-            delta = f"{float(vb) - float(va):+.3f}"
+            delta = signed(float(vb) - float(va))
         except ValueError:
             delta = ""
         rows.append(f"| {markdown_text(label)} | {va} | {vb} | {delta} |")

@@ -17,6 +17,7 @@ from inspector.cli.options import (
     params_from_args,
     parse_outage,
 )
+from inspector.numbers import signed
 
 NAME = "export"
 HELP = (
@@ -121,13 +122,6 @@ class _Progress:
         elif stage != self.stage:
             print(line, file=sys.stderr, flush=True)
         self.last, self.stage = line, stage
-
-
-def signed(value: float, digits: int = 3) -> str:
-    """A difference with its sign, ``+0.012`` / ``-0.012``; one that rounds to zero (-0.0, or
-    -0.0004 at 3 digits) is ``0.000``, without a sign."""
-    text = f"{value:+.{digits}f}"
-    return text[1:] if float(text) == 0.0 else text
 
 
 def _compare(

@@ -20,6 +20,7 @@ from typing import Any
 from estimator.io import AUTO_TOPICS, TopicChoice
 from estimator.params import Method, Params, params_to_toml
 from estimator.results import GateDecision, MatchRecord, Run
+from inspector.numbers import signed
 
 PAIR_TOLERANCE_S = 0.5
 METRIC_KEYS = (
@@ -106,6 +107,14 @@ def _fmt(v: float | None) -> str:
     return f"{v:.3f}"
 
 
+def _delta(va: float | None, vb: float | None) -> str:
+    """B - A with its sign, never ``-0.000``; empty where either is missing."""
+    if va is None or vb is None:
+        return ""
+    d = vb - va
+    return signed(d) if math.isfinite(d) else str(d)
+
+
 def write_comparison(
     out: Path, comparison: Comparison, params_a: Params, params_b: Params, names: Sequence[str]
 ) -> tuple[Path, ...]:
@@ -116,8 +125,7 @@ def write_comparison(
         w = csv.writer(f)
         w.writerow(["quantity", "A", "B", "B - A"])
         for label, va, vb in comparison.metrics:
-            delta = None if va is None or vb is None else vb - va
-            w.writerow([label, _fmt(va), _fmt(vb), _fmt(delta)])
+            w.writerow([label, _fmt(va), _fmt(vb), _delta(va, vb)])
         w.writerow(["match attempts", *comparison.attempts, ""])
         w.writerow(["accepted", *comparison.accepted, ""])
     changed_csv = out / "changed_verdicts.csv"
@@ -167,7 +175,7 @@ def _page(c: Comparison, names: Sequence[str]) -> str:
     a_name, b_name = (esc(n) for n in names)
     metric_rows = "".join(
         f"<tr><td>{esc(label)}</td><td>{_fmt(va)}</td><td>{_fmt(vb)}</td>"
-        f"<td>{_fmt(None if va is None or vb is None else vb - va)}</td></tr>"
+        f"<td>{_delta(va, vb)}</td></tr>"
         for label, va, vb in c.metrics
     )
     changed = "".join(

@@ -21,6 +21,7 @@ from urllib.parse import quote
 
 from inspector.fleet.plan import SweepPlan, format_values
 from inspector.fleet.table import KEY_METRICS
+from inspector.numbers import signed
 
 if TYPE_CHECKING:
     from inspector.fleet.engine import SweepLayout
@@ -340,7 +341,7 @@ def _num(v: Any, digits: int = 3) -> str:
 
 
 def _signed(v: Any) -> str:
-    return f"{float(v):+.3f}" if _finite(v) else "&ndash;"
+    return signed(float(v)) if _finite(v) else "&ndash;"
 
 
 def _cls(v: Any) -> str:

@@ -215,7 +215,7 @@ def test_a_missing_batch_folder_is_named_missing(tmp_path, capsys):
      (-6e-4, "-0.001"), (0.0125, "+0.013"), (-1.5, "-1.500")],
 )  # fmt: skip
 def test_signed_differences_have_no_negative_zero(value, text):
-    from inspector.cli.export import signed
+    from inspector.numbers import signed
 
     assert signed(value) == text
 

@@ -62,3 +62,14 @@ def test_two_sets_on_one_log_are_compared_attempt_by_attempt(tmp_path, capsys):
         )
         == 2
     )
+
+
+def test_the_difference_of_two_equal_figures_is_written_without_a_sign() -> None:
+    from inspector.export.compare import _delta
+    from inspector.fleet.report import _signed
+
+    # 0.1 + 0.2 - 0.3 is 5.6e-17 in floats, the other way -5.6e-17
+    assert _delta(0.1 + 0.2, 0.3) == "0.000"
+    assert _delta(1.0, 1.25) == "+0.250" and _delta(1.25, 1.0) == "-0.250"
+    assert _delta(None, 1.0) == "" and _delta(1.0, float("nan")) == "nan"
+    assert _signed(0.3 - (0.1 + 0.2)) == "0.000" and _signed(-0.5) == "-0.500"
