@@ -108,5 +108,5 @@ def test_a_run_pinned_on_another_drive_is_not_compared():
     assert same_drive(a, b) and not same_drive(a, other)
     assert "nothing to compare" in compare_markdown(a, other)
     text = compare_markdown(a, b)
-    assert "| position deviation RMSE \\[m\\] | 2.0 | 2.0 | 0.000 |" in text  # escaped, no sign on zero
+    assert "| position deviation RMSE \\[m\\] | 2.0 | 2.0 | 0.000 |" in text  # no sign on zero
     assert "0 attempts" in text
