@@ -11,6 +11,7 @@ from __future__ import annotations
 import csv
 import io
 import json
+import os
 import re
 import stat
 import xml.etree.ElementTree as ET
@@ -131,7 +132,9 @@ def route_in_frame(line: RouteLine, frame: LocalFrame) -> Route:
 # ---------------------------------------------------------------------------------------------
 
 
-def _read_text(p: Path) -> str:
+def route_file_stat(p: Path) -> os.stat_result:
+    """``p``'s status once it exists and is not a folder; else a one-line :class:`RouteError`
+    (checked before its suffix is looked up, so a folder is not "an unknown route format")."""
     try:
         info = p.stat()
     except FileNotFoundError:
@@ -140,6 +143,11 @@ def _read_text(p: Path) -> str:
         raise RouteError(p, f"cannot read the file ({exc.strerror or exc})") from None
     if stat.S_ISDIR(info.st_mode):
         raise RouteError(p, "is a folder, expected a route file")
+    return info
+
+
+def _read_text(p: Path) -> str:
+    info = route_file_stat(p)
     if not stat.S_ISREG(info.st_mode):
         raise RouteError(p, "not a regular file, expected a route file")
     size = info.st_size

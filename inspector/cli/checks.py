@@ -4,11 +4,10 @@ first, then the route's, then the output files')."""
 
 from __future__ import annotations
 
-import stat
 from collections.abc import Iterable
 from pathlib import Path
 
-from estimator.errors import LogError, RouteError, RoutefuseError
+from estimator.errors import LogError, RoutefuseError
 
 GLOB_CHARACTERS = frozenset("*?[")
 """A log argument holding one of these is a glob pattern, not a path that must exist."""
@@ -28,15 +27,10 @@ def check_log(log: str | Path) -> Path:
 def check_route(route: str | Path) -> Path:
     """``route`` as a path, once it is an existing file (a folder is named as one, instead of
     as an unknown route format); its format and content are the route reader's to check."""
+    from estimator.io.routefile import route_file_stat
+
     path = Path(route).expanduser()
-    try:
-        info = path.stat()
-    except FileNotFoundError:
-        raise RouteError(path, "no such file") from None
-    except OSError as exc:
-        raise RouteError(path, f"cannot read the file ({exc.strerror or exc})") from None
-    if stat.S_ISDIR(info.st_mode):
-        raise RouteError(path, "is a folder, expected a route file")
+    route_file_stat(path)
     return path
 
 
