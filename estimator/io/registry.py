@@ -93,15 +93,21 @@ def is_log_path(path: str | Path) -> bool:
     return any(fmt.recognises(p) for fmt in LOG_FORMATS.values())
 
 
-def open_log_path(path: Path) -> tuple[LogReader, Path]:
-    """The format of ``path`` and what it reads, or a one-line :class:`LogError` saying why
-    this is not a log."""
+def check_log_exists(path: str | Path) -> None:
+    """A one-line :class:`LogError` when ``path`` (a log file or folder) does not exist or
+    cannot be looked at."""
     try:
-        path.stat()
+        Path(path).stat()
     except FileNotFoundError:
         raise LogError(path, "no such file or folder") from None
     except OSError as exc:
         raise LogError(path, f"cannot open it ({exc.strerror or exc})") from None
+
+
+def open_log_path(path: Path) -> tuple[LogReader, Path]:
+    """The format of ``path`` and what it reads, or a one-line :class:`LogError` saying why
+    this is not a log."""
+    check_log_exists(path)
     for fmt in LOG_FORMATS.values():
         source = fmt.locate(path)
         if source is not None:

@@ -133,14 +133,15 @@ class _RosbagsLog:
 
 
 @contextlib.contextmanager
-def _whole(path: Path, source: Path) -> Iterator[tuple[Path, Recovered | None]]:
+def _whole(path: Path, source: Path, kind: str) -> Iterator[tuple[Path, Recovered | None]]:
     """``source``, or where it was cut off, a complete copy of its whole records (in a
     temporary folder for as long as it is read)."""
     if ends_whole(source):
         yield source, None
         return
+    check_decompressed_size(source)  # before recovery decompresses its chunks
     with tempfile.TemporaryDirectory(prefix="routefuse-recovered-") as folder:
-        with _reading(path, "ROS 2 bag / mcap file"):
+        with _reading(path, kind):
             recovered = recover_mcap(source, Path(folder) / source.name)
         yield recovered.path, recovered
 
@@ -156,8 +157,7 @@ class McapFile(_RosbagsLog):
     kind = "ROS 2 bag / mcap file"
 
     def topics(self, path: Path, source: Path) -> dict[str, tuple[str, int]]:
-        check_decompressed_size(source)
-        with _whole(path, source) as (readable, _):
+        with _whole(path, source, self.kind) as (readable, _):
             return super().topics(path, readable)
 
     def read(
@@ -167,8 +167,7 @@ class McapFile(_RosbagsLog):
         choice: TopicChoice,
         progress: Callable[[float], None] | None,
     ) -> Log:
-        check_decompressed_size(source)
-        with _whole(path, source) as (readable, recovered):
+        with _whole(path, source, self.kind) as (readable, recovered):
             log = super().read(path, readable, choice, progress)
         if recovered is None:
             return log

@@ -7,7 +7,7 @@ from __future__ import annotations
 from collections.abc import Iterable
 from pathlib import Path
 
-from estimator.errors import LogError, RoutefuseError
+from estimator.errors import RoutefuseError
 
 GLOB_CHARACTERS = frozenset("*?[")
 """A log argument holding one of these is a glob pattern, not a path that must exist."""
@@ -67,12 +67,8 @@ def check_output_file(path: Path) -> None:
 def check_log_specs(specs: Iterable[str]) -> None:
     """Log arguments that are plain paths (not glob patterns) must exist: a missing one is
     named as missing, not as a folder or glob that matched no log."""
+    from estimator.io.registry import check_log_exists
+
     for spec in specs:
         if GLOB_CHARACTERS.isdisjoint(spec):
-            path = Path(spec).expanduser()
-            try:
-                path.stat()
-            except FileNotFoundError:
-                raise LogError(spec, "no such file or folder") from None
-            except OSError as exc:
-                raise LogError(spec, f"cannot open it ({exc.strerror or exc})") from None
+            check_log_exists(Path(spec).expanduser())

@@ -15,6 +15,7 @@ from typing import TYPE_CHECKING, Literal
 
 from estimator.errors import RoutefuseError
 from estimator.io import route_beside
+from estimator.io.registry import check_log_exists
 from inspector.cli.checks import check_log, route_for
 from inspector.cli.options import (
     add_outage_option,
@@ -111,12 +112,7 @@ def resolve_inputs(log: str | None, route: str | None) -> tuple[Path, Path]:
             return log_path, trap
     else:
         log_path = Path(log).expanduser()
-        try:
-            log_path.stat()
-        except FileNotFoundError:
-            raise RoutefuseError(log_path, "no such file or folder") from None
-        except OSError as exc:
-            raise RoutefuseError(log_path, f"cannot open it ({exc.strerror or exc})") from None
+        check_log_exists(log_path)
     if route is None and route_beside(log_path) is None:
         # the log's own problem first (a bad log with its route beside it is the inspector's to
         # report, and the server stays up for another one)
