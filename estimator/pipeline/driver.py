@@ -196,7 +196,7 @@ def run(
         + approach_warnings(driver.checkpoints, driver.inp.degraded, log.t_start, p)
         + unplaced_along_warnings(epochs, driver.records, inputs.degraded, log.t_start)
         + (
-            far_route_warnings(epochs, route, inputs.degraded, log.t_start, p)
+            far_route_warnings(epochs, route, driver.records, inputs.degraded, log.t_start, p)
             if matching and route is not None
             else ()
         ),
@@ -321,6 +321,7 @@ def approach_warnings(
 def far_route_warnings(
     epochs: Epochs,
     route: Route,
+    records: Sequence[MatchRecord],
     degraded: Sequence[tuple[float, float]],
     t_start: float,
     p: Params,
@@ -330,12 +331,25 @@ def far_route_warnings(
     can be accepted there, and the outage is dead-reckoned. A route within the few kilometres
     :func:`~estimator.pipeline.inputs.open_inputs` lets through may still be the wrong one,
     or drawn elsewhere; without this line the run would read as a right route that matched
-    nothing."""
+    nothing. Where the outage's matches moved the route back by a map bias the approach
+    learned (``extensions.map_bias``), the distance is to the route so moved: that is the one
+    they are made against, and a map drawn a hundred metres off but learned is not a wrong
+    route."""
     cap = p.gates.max_correction_m
     far: list[tuple[float, float]] = []
-    for a, _ in degraded:
+    for a, b in degraded:
         k = min(max(int(np.searchsorted(epochs.t, a, side="right")) - 1, 0), len(epochs.t) - 1)
-        d = float(route.project(epochs.position[k : k + 1, :2]).distance[0])
+        here = epochs.position[k, :2]
+        bias = next(
+            (
+                r.map_bias
+                for r in records
+                if a <= r.t <= b and r.map_bias is not None and r.map_bias.applied
+            ),
+            None,
+        )
+        on_map = here + bias.at(here) if bias is not None else here
+        d = float(route.project(on_map[None, :]).distance[0])
         if d > cap:
             far.append((a, d))
     if not far:
