@@ -807,6 +807,25 @@ def carried_bias(
     )
 
 
+def carried_explains(carried: MapBias, fresh: MapBias, params: Params) -> bool:
+    """Whether ``fresh``, learned afresh before this outage and refused as too large for a
+    map's error, is the bias ``carried`` (:func:`carried_bias`, from the previous outage)
+    predicts at ``fresh``'s pivot (``extensions.map_bias_carry_turned``): its shift turned by
+    its rotation about its own pivot, within ``offset.map_bias_max_prior_sigmas`` of the two
+    covariances together. The test for another road holds a fresh bias against the generic
+    prior of a map's error; after a map's rotation was learned, the map's own field is the
+    better prior, and a parallel road does not follow it."""
+    if fresh.refused != "too large" or not carried.significant:
+        return False
+    if not (np.all(np.isfinite(fresh.measured)) and np.all(np.isfinite(fresh.pivot))):
+        return False
+    d = fresh.pivot - carried.pivot
+    predicted = carried.offset + carried.rotation * np.array([-d[1], d[0]])
+    r = fresh.measured - predicted
+    chi2 = float(r @ np.linalg.solve(carried.cov[1:, 1:] + fresh.measured_cov, r))
+    return chi2 <= params.offset.map_bias_max_prior_sigmas**2
+
+
 def refined_bias(
     track_xy: F64,
     track_cov: F64,

@@ -748,6 +748,15 @@ class ExtensionParams:
         "evidence against the one a longer approach established, and the applied-or-not "
         "decision would otherwise flip on small changes of the stretch",
     )
+    map_bias_carry_turned: bool = param(
+        True,
+        "a map bias applied in the previous outage is also carried to the next (as with "
+        "extensions.map_bias_keep_applied) when the one learned afresh is refused as too large "
+        "for a map's error but is the shift the carried bias, turned by its rotation over the "
+        "kilometres between, predicts there (within offset.map_bias_max_prior_sigmas of the "
+        "two covariances): a map turned a degree is tens of metres off one tunnel further on, "
+        "which the generic prior calls another road",
+    )
     map_bias_portal_cut: bool = param(
         False,
         "the map-bias fit's approach (and its refinement) ends offset.map_bias_portal_cut_s "

@@ -94,6 +94,7 @@ from estimator.matching.kernels import max_turn_deg, search_right, track_window
 from estimator.matching.map_bias import (
     MapBias,
     carried_bias,
+    carried_explains,
     learn_map_bias,
     prior_bias,
     refined_bias,
@@ -700,27 +701,34 @@ class Driver:
                 last = kept
             track = self._bias_track(rows, last)
             tr.bias = self._learn_bias(track, s_bias)
+            carried = None
+            if previous is not None and previous[0].significant:
+                bias, offset, pivot_dist = previous
+                carried = carried_bias(
+                    bias,
+                    offset,
+                    position=x[:2].copy(),
+                    lane_seen=self._offset_near_portal(rows, used, t_a, s_last),
+                    normal=self.route.normal_at(np.array([tr.s]))[0],
+                    metres=float(aux[A_DIST]) - pivot_dist,
+                    params=self.p,
+                )
             if previous is not None and (
                 not np.isfinite(tr.bias.chi2)
                 or (self.p.extensions.map_bias_keep_applied and keeps_carried(previous[0], tr.bias))
+                or (
+                    self.p.extensions.map_bias_carry_turned
+                    and carried is not None
+                    and carried_explains(carried, tr.bias, self.p)
+                )
             ):
                 # too little driving since the previous outage to learn, or too little to
-                # overturn the bias it applied: its bias still holds
-                bias, offset, pivot_dist = previous
-                normal = self.route.normal_at(np.array([tr.s]))[0]
-                if bias.significant:
+                # overturn the bias it applied, or a bias it predicts: its bias still holds
+                bias, _, pivot_dist = previous
+                if carried is not None:
                     tr.pivot_dist = pivot_dist
-                    tr.bias = carried_bias(
-                        bias,
-                        offset,
-                        position=x[:2].copy(),
-                        lane_seen=self._offset_near_portal(rows, used, t_a, s_last),
-                        normal=normal,
-                        metres=float(aux[A_DIST]) - pivot_dist,
-                        params=self.p,
-                    )
+                    tr.bias = carried
                     if self.p.offset.map_bias_refine and track is not None:
-                        carried = tr.bias
                         if self.p.extensions.map_turn_two_places:
                             # fixes refused after an outage leave the estimate where dead
                             # reckoning put it (metres off across), which the fit of a second
@@ -740,6 +748,7 @@ class Driver:
                             # the rotation learned from the two places turns about the new one
                             tr.pivot_dist = float(track[-1, O_DIST])
                 else:
+                    normal = self.route.normal_at(np.array([tr.s]))[0]
                     tr.bias = unbiased(self.p, lane=tr.lane, normal=normal, learned=bias)
             tr.lane = tr.bias.lane
             if self.p.extensions.unapplied_bias_consider:

@@ -198,6 +198,7 @@ MATCHING_EXTENSIONS = (
     "unapplied_bias_lane_tie",
     "unapplied_bias_estimate",
     "map_bias_keep_applied",
+    "map_bias_carry_turned",
     "map_turn_consider",
     "map_turn_estimate",
     "map_turn_two_places",
