@@ -63,8 +63,17 @@ class LogEntry:
 
     @property
     def route_error(self) -> str | None:
+        """Why this log's tasks cannot run for want of a route (None: it has one). A log that
+        cannot be opened either is named for its own problem (unreadable, empty, not a log),
+        as ``routefuse run`` does, not as a log without a route."""
         if self.route is not None:
             return None
+        from estimator.io.registry import open_log_path
+
+        try:
+            open_log_path(self.log)
+        except RoutefuseError as exc:
+            return " ".join(str(exc).split())
         stem = self.log.name.split(".")[0]
         return (
             f"{self.log}: no route {stem}.route.geojson beside the log "
@@ -155,8 +164,16 @@ def find_logs(spec: str | Path) -> list[Path]:
     """The logs a folder holds (what the log-format registry recognises directly in it), or
     whatever a glob pattern matches (route files left out)."""
     p = Path(spec).expanduser()
-    if p.is_dir():
-        found = [c for c in sorted(p.iterdir()) if is_log_path(c)]
+    try:
+        folder = p.is_dir()
+    except OSError:  # a glob inside a folder that cannot be looked into: it matches nothing
+        folder = False
+    if folder:
+        try:
+            children = sorted(p.iterdir())
+        except OSError as exc:
+            raise RoutefuseError(spec, f"cannot list the folder ({exc.strerror or exc})") from None
+        found = [c for c in children if _may_be_log(c)]
     else:
         found = [Path(m) for m in sorted(glob.glob(str(p)))]
         found = [m for m in found if not is_route_path(m)]
@@ -165,6 +182,16 @@ def find_logs(spec: str | Path) -> list[Path]:
             spec, f"no logs found (expected a folder holding {LOG_FORMATS_TEXT}, or a glob)"
         )
     return found
+
+
+def _may_be_log(path: Path) -> bool:
+    """Whether ``path`` is a log (:func:`estimator.io.is_log_path`), or a folder that cannot be
+    looked into (no permission): kept, so that its task fails naming the problem instead of the
+    folder being skipped without a word or the whole sweep stopping."""
+    try:
+        return is_log_path(path)
+    except OSError:
+        return True
 
 
 def is_manifest(path: Path) -> bool:
@@ -243,7 +270,11 @@ def collect_logs(
         if is_manifest(p):
             entries.extend(read_manifest(p))
             continue
-        logs = [p] if p.exists() and is_log_path(p) else find_logs(spec)
+        try:
+            named = p.exists() and _may_be_log(p)
+        except OSError:  # inside a folder that cannot be looked into: a glob, or not found
+            named = False
+        logs = [p] if named else find_logs(spec)
         entries.extend(LogEntry(log, route_beside(log), "") for log in logs)
     unique: dict[tuple[str, Outages], LogEntry] = {}
     for e in entries:

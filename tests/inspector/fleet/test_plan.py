@@ -21,6 +21,7 @@ def _touch(folder: Path, *names: str) -> None:
 
 def test_logs_from_a_folder_a_glob_and_a_manifest(tmp_path):
     _touch(tmp_path, "a.mcap", "a.route.geojson", "b.mcap", "b.route.gpx", "c.bag", "notes.txt")
+    (tmp_path / "c.bag").write_bytes(b"#ROSBAG V2.0\n")  # a log without a route, not a bad log
     sub = tmp_path / "sub"
     sub.mkdir()
     _touch(sub, "a.mcap", "a.route.geojson", "other.geojson")
@@ -168,3 +169,29 @@ def test_regressions_are_ranked_against_truth_where_the_logs_have_it():
     with_truth = [{"rmse_pos_dev_m": 0.3, "rmse_h_err_m": 2.0}, {"rmse_pos_dev_m": 0.4}]
     assert ranking_metric(with_truth) == "rmse_h_err_m"
     assert ranking_metric([{"rmse_pos_dev_m": 0.3, "rmse_h_err_m": None}]) == "rmse_pos_dev_m"
+
+
+def test_a_folder_that_cannot_be_read_is_a_member_named_for_its_problem(tmp_path, unreadable):
+    """An unreadable folder beside the logs neither stops the sweep (it used to end it with
+    "internal error: PermissionError") nor vanishes: its task fails saying why."""
+    _touch(tmp_path, "a.mcap", "a.route.geojson")
+    locked = tmp_path / "locked"
+    locked.mkdir()
+    _touch(locked, "b.mcap", "b.route.geojson")
+    unreadable(locked)
+    entries = {e.label: e for e in collect_logs([str(tmp_path)])}
+    assert sorted(entries) == ["a", "locked"]
+    assert entries["locked"].route_error == f"{locked}: cannot open it (Permission denied)"
+    assert entries["a"].route_error is None
+    # named alone: one member, the same one-line problem
+    (alone,) = collect_logs([str(locked)])
+    assert alone.route_error == f"{locked}: cannot open it (Permission denied)"
+    # a glob inside it matches nothing, said as such
+    with pytest.raises(RoutefuseError, match="no logs found"):
+        collect_logs([str(locked / "*.mcap")])
+
+
+def test_a_log_that_cannot_be_opened_is_named_for_that_not_for_its_missing_route(tmp_path):
+    (tmp_path / "empty.mcap").write_bytes(b"")
+    (entry,) = collect_logs([str(tmp_path / "empty.mcap")])
+    assert entry.route_error == f"{tmp_path / 'empty.mcap'}: file is empty"
