@@ -23,3 +23,19 @@ def test_a_glob_matching_nothing_still_says_no_logs_found(
     assert main(["sweep", pattern, "--out", str(tmp_path / "out")]) == 2
     err = capsys.readouterr().err
     assert err.count("\n") == 1 and f"{pattern}: no logs found" in err
+
+
+def test_the_failed_tasks_are_named_after_the_summary_even_when_quiet(
+    tmp_path: Path, capsys: pytest.CaptureFixture[str]
+) -> None:
+    """Exit 2 says some task failed; the output says which and why (it used to give only the
+    count with --quiet, so a CI log could not tell what failed)."""
+    empty = tmp_path / "empty.mcap"
+    empty.write_bytes(b"")
+    out = tmp_path / "out"
+    assert main(["sweep", str(empty), "--out", str(out), "--quiet"]) == 2
+    captured = capsys.readouterr()
+    lines = captured.out.splitlines()
+    assert "1 failed" in lines[0]
+    assert lines[-1] == f"failed: empty.mcap default: {empty}: file is empty"
+    assert captured.err == ""
