@@ -76,9 +76,11 @@ def read_rows(parquet: Path) -> list[dict[str, Any]]:
 
 def write_report(plan: SweepPlan, layout: SweepLayout, parquet: Path) -> Path:
     path = layout.out / "report.html"
-    path.write_text(
+    tmp = path.with_name(".report.html.tmp")
+    tmp.write_text(
         report_html(plan, read_rows(parquet), layout=layout, base=layout.out), encoding="utf-8"
     )
+    tmp.replace(path)  # whole or not at all
     return path
 
 
