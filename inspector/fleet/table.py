@@ -16,6 +16,7 @@ from __future__ import annotations
 
 import contextlib
 import csv
+import itertools
 import json
 import os
 from collections.abc import Iterable, Iterator, Mapping, Sequence
@@ -246,7 +247,7 @@ def write_table(
             out = csv.writer(fh)
             out.writerow(names)
             chunk: list[Mapping[str, Any]] = []
-            for row in [*rows, None]:
+            for row in itertools.chain(rows, [None]):  # streamed: one chunk in memory
                 if row is not None:
                     chunk.append(row)
                 if chunk and (row is None or len(chunk) >= CHUNK_ROWS):

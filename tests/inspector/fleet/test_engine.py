@@ -231,3 +231,31 @@ def test_a_table_write_that_fails_midway_leaves_no_table(tmp_path):
     with pytest.raises(KeyboardInterrupt):
         write_table(rows(), [("log", str)], tmp_path)
     assert list(tmp_path.iterdir()) == []
+
+
+def test_the_table_is_written_in_chunks_without_holding_every_row(tmp_path, monkeypatch):
+    """write_table took every row into one list before its first chunk (``[*rows, None]``): a
+    sweep's client held the whole table at the end, however large."""
+    import inspector.fleet.table as table
+
+    monkeypatch.setattr(table, "CHUNK_ROWS", 2)
+    yielded = 0
+    first_write_after: list[int] = []
+    real_typed = table._typed
+
+    def typed(value, tp):
+        if not first_write_after:
+            first_write_after.append(yielded)
+        return real_typed(value, tp)
+
+    monkeypatch.setattr(table, "_typed", typed)
+
+    def rows():
+        nonlocal yielded
+        for i in range(7):
+            yielded += 1
+            yield {"log": f"log{i}"}
+
+    table.write_table(rows(), [("log", str)], tmp_path)
+    assert first_write_after == [2]
+    assert (tmp_path / "results.csv").read_text().splitlines()[1:] == [f"log{i}" for i in range(7)]
