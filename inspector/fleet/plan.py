@@ -284,7 +284,7 @@ def collect_logs(
     used: set[str] = set()
     labelled = []
     for e in unique.values():
-        name = _slug(e.log.name.split(".")[0] or "log")
+        name = _slug(e.log.name.split(".")[0], "log")
         label, k = name, 2
         while label in used:
             label, k = f"{name}-{k}", k + 1
@@ -422,9 +422,10 @@ def _text(v: Any) -> str:
     return str(v)
 
 
-def _slug(name: str) -> str:
-    """A file-name-safe form: letters, digits, ``. _ = , + -``; the rest replaced by ``_``."""
-    slug = re.sub(r"[^A-Za-z0-9._=,+-]+", "_", name).strip("._") or "set"
+def _slug(name: str, fallback: str = "set") -> str:
+    """A file-name-safe form: letters and digits of any script, ``. _ = , + -``; the rest
+    (spaces, slashes, markup) replaced by ``_``; ``fallback`` when nothing is left."""
+    slug = re.sub(r"[^\w.=,+-]+", "_", name).strip("._") or fallback
     return slug[:80]
 
 

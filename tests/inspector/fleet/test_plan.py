@@ -195,3 +195,11 @@ def test_a_log_that_cannot_be_opened_is_named_for_that_not_for_its_missing_route
     (tmp_path / "empty.mcap").write_bytes(b"")
     (entry,) = collect_logs([str(tmp_path / "empty.mcap")])
     assert entry.route_error == f"{tmp_path / 'empty.mcap'}: file is empty"
+
+
+def test_labels_keep_the_letters_of_any_script(tmp_path):
+    """Labels dropped every letter outside ASCII: "東京トンネル.mcap" was labelled "set" in the
+    table and the report, and "tunnel <b>bold é ü.mcap" "tunnel_b_bold"."""
+    _touch(tmp_path, "東京トンネル.mcap", "tunnel <b>bold é ü.mcap", "..mcap")
+    labels = sorted(e.label for e in collect_logs([str(tmp_path)]))
+    assert labels == ["log", "tunnel_b_bold_é_ü", "東京トンネル"]
