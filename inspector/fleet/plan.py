@@ -272,8 +272,8 @@ def collect_logs(
             continue
         try:
             named = p.exists() and _may_be_log(p)
-        except OSError:  # inside a folder that cannot be looked into: a glob, or not found
-            named = False
+        except OSError:  # inside a folder that cannot be looked into: a glob matches nothing
+            named = not any(c in str(spec) for c in "*?[")  # a path: a member named for it
         logs = [p] if named else find_logs(spec)
         entries.extend(LogEntry(log, route_beside(log), "") for log in logs)
     unique: dict[tuple[str, Outages], LogEntry] = {}
