@@ -60,6 +60,8 @@ class LogEntry:
     """unique within the plan: the log's stem, ``-2`` ... on a clash (a folder name)"""
     outages: Outages = ()
     tags: tuple[str, ...] = ()
+    route_problem: str = ""
+    """why ``route`` is None when a manifest named one (it does not exist)"""
 
     @property
     def route_error(self) -> str | None:
@@ -74,6 +76,8 @@ class LogEntry:
             open_log_path(self.log)
         except RoutefuseError as exc:
             return " ".join(str(exc).split())
+        if self.route_problem:
+            return self.route_problem
         stem = self.log.name.split(".")[0]
         return (
             f"{self.log}: no route {stem}.route.geojson beside the log "
@@ -233,12 +237,14 @@ def read_manifest(path: Path) -> list[LogEntry]:
         row = {(k or "").strip().lower(): (v or "").strip() for k, v in raw.items()}
         if not row.get("log"):
             raise ConfigError(path, f"line {n}: no log")
+        # a row whose log or route is missing is a member whose tasks fail naming it (the
+        # rest of a nightly manifest runs), not the end of the sweep
         log = _resolve(base, row["log"])
-        if not log.exists():
-            raise ConfigError(path, f"line {n}: {row['log']}: no such file or folder")
         route = _resolve(base, row["route"]) if row.get("route") else route_beside(log)
+        problem = ""
         if route is not None and not route.is_file():
-            raise ConfigError(path, f"line {n}: {row['route']}: no such route file")
+            problem = f"{route}: no such route file (manifest {path.name}, line {n})"
+            route = None
         try:
             outages = tuple(
                 parse_outage(o) for o in row.get("outages", "").replace(",", " ").split()
@@ -246,7 +252,7 @@ def read_manifest(path: Path) -> list[LogEntry]:
         except ConfigError as exc:
             raise ConfigError(path, f"line {n}: outages {exc.problem}") from None
         tags = tuple(t for t in re.split(r"[;\s]+", row.get("tags", "")) if t)
-        entries.append(LogEntry(log, route, "", outages, tags))
+        entries.append(LogEntry(log, route, "", outages, tags, problem))
     if not entries:
         raise ConfigError(path, "the manifest lists no log")
     return entries
@@ -279,7 +285,9 @@ def collect_logs(
     unique: dict[tuple[str, Outages], LogEntry] = {}
     for e in entries:
         route = None if e.route is None else e.route.absolute()
-        e = LogEntry(e.log.absolute(), route, "", e.outages or default_outages, e.tags)
+        e = LogEntry(
+            e.log.absolute(), route, "", e.outages or default_outages, e.tags, e.route_problem
+        )
         unique.setdefault((str(e.log.resolve()), e.outages), e)
     used: set[str] = set()
     labelled = []
@@ -289,7 +297,7 @@ def collect_logs(
         while label in used:
             label, k = f"{name}-{k}", k + 1
         used.add(label)
-        labelled.append(LogEntry(e.log, e.route, label, e.outages, e.tags))
+        labelled.append(LogEntry(e.log, e.route, label, e.outages, e.tags, e.route_problem))
     return tuple(labelled)
 
 

@@ -51,10 +51,8 @@ def test_logs_from_a_folder_a_glob_and_a_manifest(tmp_path):
 @pytest.mark.parametrize(
     ("text", "message"),
     [
-        ("log,route\nmissing.mcap,\n", "line 2: missing.mcap: no such file"),
         ("log,weather\na.mcap,sunny\n", "unknown column 'weather'"),
         ("log,outages\na.mcap,50:20\n", "line 2: outages"),
-        ("log,route\na.mcap,nowhere.geojson\n", "line 2: nowhere.geojson: no such route"),
         ("log\n", "lists no log"),
     ],
 )
@@ -203,3 +201,17 @@ def test_labels_keep_the_letters_of_any_script(tmp_path):
     _touch(tmp_path, "東京トンネル.mcap", "tunnel <b>bold é ü.mcap", "..mcap")
     labels = sorted(e.label for e in collect_logs([str(tmp_path)]))
     assert labels == ["log", "tunnel_b_bold_é_ü", "東京トンネル"]
+
+
+def test_a_manifest_row_whose_log_or_route_is_missing_is_a_failed_member(tmp_path):
+    """One deleted file in a nightly manifest used to stop the whole sweep before it began."""
+    (tmp_path / "a.mcap").write_bytes(b"\x89MCAP0\r\n")
+    (tmp_path / "a.route.geojson").write_text("{}")
+    manifest = tmp_path / "m.csv"
+    manifest.write_text("log,route\na.mcap,nowhere.geojson\nmissing.mcap,\na.mcap,\n")
+    entries = collect_logs([str(manifest)])
+    assert [e.label for e in entries] == ["a", "missing"]  # a.mcap once (same outages)
+    assert entries[0].route_error == (
+        f"{tmp_path / 'nowhere.geojson'}: no such route file (manifest m.csv, line 2)"
+    )
+    assert entries[1].route_error == f"{tmp_path / 'missing.mcap'}: no such file or folder"
