@@ -38,8 +38,8 @@ def add_arguments(parser: argparse.ArgumentParser) -> None:
         "--batch",
         metavar="DIR_OR_GLOB",
         help="export every log of a folder (or matching a quoted glob); each log's route is "
-        "<stem>.route.geojson beside it; the logs run as Dask tasks (routefuse sweep's engine) "
-        "and a second run skips the logs exported before",
+        "<stem>.route.* beside it (GeoJSON, GPX, KML or CSV); the logs run as Dask tasks "
+        "(routefuse sweep's engine) and a second run skips the logs exported before",
     )
     where = parser.add_mutually_exclusive_group()
     where.add_argument(
