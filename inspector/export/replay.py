@@ -17,8 +17,11 @@ import contextlib
 import dataclasses
 import io
 import math
+import os
+import shutil
 import socket
 import time
+import uuid
 from collections.abc import Callable, Iterator, Sequence
 from dataclasses import dataclass, field
 from importlib import resources
@@ -150,11 +153,19 @@ def export_log(
         outages=outages,
         subtract_lane_offset=subtract_lane_offset,
     )
+    # written into a hidden folder of ``out`` and moved into place once every file is there:
+    # stopped midway (Ctrl-C, an error), ``out`` keeps the earlier export whole, or nothing,
+    # never this export's first files beside that one's replay and report
+    staging = out / f".partial-{uuid.uuid4().hex[:12]}"
     try:
-        files, n_frames = _write_files(out, inputs, baseline, compared, doc, replay, steps)
+        make_dir(staging)
+        files, n_frames = _write_files(staging, inputs, baseline, compared, doc, replay, steps)
+        files = _publish(files, out)
     except OSError as exc:
         where = exc.filename or out
         raise RoutefuseError(where, f"cannot write: {exc.strerror or exc}") from None
+    finally:
+        shutil.rmtree(staging, ignore_errors=True)
     steps.report("done", 1.0)
     return ExportResult(
         log=log_path,
@@ -219,6 +230,15 @@ def _write_files(
     steps.lap("replay_s")
     files += (export_tables.write_report(out, doc, files, steps.timings),)
     return files, len(frames)
+
+
+def _publish(files: Sequence[Path], out: Path) -> tuple[Path, ...]:
+    """Move the written ``files`` into ``out`` (each replacing its earlier version), the report
+    page, which links the rest, last."""
+    ordered = sorted(files, key=lambda f: f.name == "report.html")
+    for f in ordered:
+        os.replace(f, out / f.name)
+    return tuple(out / f.name for f in files)
 
 
 def make_dir(path: Path) -> None:
