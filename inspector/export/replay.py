@@ -390,12 +390,24 @@ def write_replay(
         title=title,
         method=method,
     )
+    html = _with_title(html, f"routefuse replay: {title}")
     body_end = html.rindex("</body>")
     html_path.write_text(html[:body_end] + panel + html[body_end:], encoding="utf-8")
     viser_path.write_bytes(data)
     if progress is not None:
         progress(1.0)
     return html_path, viser_path
+
+
+def _with_title(page: str, title: str) -> str:
+    """viser's page with ``title`` (escaped) instead of its own "Viser", so that a browser tab,
+    its history and a bookmark name the log replayed."""
+    import html as html_text
+
+    start, end = page.find("<title>"), page.find("</title>")
+    if start < 0 or end < start:
+        return page
+    return page[: start + len("<title>")] + html_text.escape(title) + page[end:]
 
 
 PLAYBACK_SPEEDS = (1.0, 2.0, 5.0, 10.0, 20.0, 50.0, 100.0, 200.0)
