@@ -119,63 +119,70 @@ def export_log(
     log_path, route_path, out = Path(log_path), Path(route_path), Path(out_dir)
     params = params or Params()
     _check_replay_options(replay)
+    created = not out.exists()
     make_dir(out)  # before the runs: a bad --out fails at once
-    steps = _Stages(progress or (lambda stage, fraction: None))
-    stage, lap = steps.stage, steps.lap
-    inputs = open_inputs(
-        log_path,
-        route_path,
-        topics=topics,
-        route_feature=route_feature,
-        cache_dir=cache_dir,
-        progress=stage("loading", 0, 0.2),
-    )
-    lap("load_s")
-    stages = {
-        "baseline": stage("baseline run", 0.2, 0.35),
-        method: stage(f"{method} run", 0.35, 0.55),
-    }
-    session = run_methods(
-        inputs,
-        params,
-        methods=("baseline", method),
-        outages=outages,
-        progress=lambda m, f: stages[m](f),
-    )
-    baseline, compared = session["baseline"], session[method]
-    lap("run_s")
-    doc = export_tables.metrics_document(
-        inputs,
-        baseline,
-        compared,
-        log_path,
-        route_path,
-        outages=outages,
-        subtract_lane_offset=subtract_lane_offset,
-    )
-    # written into a hidden folder of ``out`` and moved into place once every file is there:
-    # stopped midway (Ctrl-C, an error), ``out`` keeps the earlier export whole, or nothing,
-    # never this export's first files beside that one's replay and report
-    staging = out / f".partial-{uuid.uuid4().hex[:12]}"
     try:
-        make_dir(staging)
-        files, n_frames = _write_files(staging, inputs, baseline, compared, doc, replay, steps)
-        files = _publish(files, out)
-    except OSError as exc:
-        where = exc.filename or out
-        raise RoutefuseError(where, f"cannot write: {exc.strerror or exc}") from None
-    finally:
-        shutil.rmtree(staging, ignore_errors=True)
-    steps.report("done", 1.0)
-    return ExportResult(
-        log=log_path,
-        route=route_path,
-        out_dir=out,
-        files=files,
-        metrics=doc,
-        frames=n_frames,
-        timings=steps.timings,
-    )
+        steps = _Stages(progress or (lambda stage, fraction: None))
+        stage, lap = steps.stage, steps.lap
+        inputs = open_inputs(
+            log_path,
+            route_path,
+            topics=topics,
+            route_feature=route_feature,
+            cache_dir=cache_dir,
+            progress=stage("loading", 0, 0.2),
+        )
+        lap("load_s")
+        stages = {
+            "baseline": stage("baseline run", 0.2, 0.35),
+            method: stage(f"{method} run", 0.35, 0.55),
+        }
+        session = run_methods(
+            inputs,
+            params,
+            methods=("baseline", method),
+            outages=outages,
+            progress=lambda m, f: stages[m](f),
+        )
+        baseline, compared = session["baseline"], session[method]
+        lap("run_s")
+        doc = export_tables.metrics_document(
+            inputs,
+            baseline,
+            compared,
+            log_path,
+            route_path,
+            outages=outages,
+            subtract_lane_offset=subtract_lane_offset,
+        )
+        # written into a hidden folder of ``out`` and moved into place once every file is there:
+        # stopped midway (Ctrl-C, an error), ``out`` keeps the earlier export whole, or nothing,
+        # never this export's first files beside that one's replay and report
+        staging = out / f".partial-{uuid.uuid4().hex[:12]}"
+        try:
+            make_dir(staging)
+            files, n_frames = _write_files(staging, inputs, baseline, compared, doc, replay, steps)
+            files = _publish(files, out)
+        except OSError as exc:
+            where = exc.filename or out
+            raise RoutefuseError(where, f"cannot write: {exc.strerror or exc}") from None
+        finally:
+            shutil.rmtree(staging, ignore_errors=True)
+        steps.report("done", 1.0)
+        return ExportResult(
+            log=log_path,
+            route=route_path,
+            out_dir=out,
+            files=files,
+            metrics=doc,
+            frames=n_frames,
+            timings=steps.timings,
+        )
+    except BaseException:
+        if created:  # a log that failed leaves no empty folder that looks like its export
+            with contextlib.suppress(OSError):
+                out.rmdir()
+        raise
 
 
 @dataclass

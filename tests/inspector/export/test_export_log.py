@@ -445,3 +445,22 @@ def test_an_export_stopped_midway_leaves_the_earlier_one_whole(bag, tmp_path, mo
     assert {p.name for p in out.iterdir()} == EXPECTED
     assert all(f.parent == out and f.is_file() for f in result.files)
     assert (out / "metrics.json").read_text().startswith("{")
+
+
+def test_a_failed_export_leaves_no_empty_folder(bag, tmp_path):
+    """A batch or sweep --export left an empty folder for each log whose route could not be
+    read, beside the real exports."""
+    from estimator.errors import RoutefuseError
+
+    log, _ = bag
+    bad_route = tmp_path / "bad.route.geojson"
+    bad_route.write_text("not json")
+    out = tmp_path / "exports" / "bad"
+    with pytest.raises(RoutefuseError, match="not valid JSON"):
+        export_log(log, bad_route, out)
+    assert not out.exists() and (tmp_path / "exports").is_dir()
+    kept = tmp_path / "kept"
+    kept.mkdir()
+    with pytest.raises(RoutefuseError):
+        export_log(log, bad_route, kept)
+    assert kept.is_dir()  # a folder the user made stays
