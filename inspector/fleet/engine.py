@@ -64,7 +64,7 @@ from typing import TYPE_CHECKING, Any, Literal, Protocol
 from estimator.errors import RoutefuseError
 from estimator.io import TopicChoice
 from estimator.params import params_to_toml
-from inspector.fleet.plan import SweepPlan, Task, format_values
+from inspector.fleet.plan import SweepPlan, Task, estimator_source, format_values
 from inspector.fleet.table import failed_row, one_line, read_task_file, task_row
 
 if TYPE_CHECKING:
@@ -465,6 +465,7 @@ def prepare_output(plan: SweepPlan, layout: SweepLayout) -> None:
             encoding="utf-8",
         )
     doc = {
+        "estimator_source": estimator_source(),
         "reference": plan.reference.name,
         "sets": [
             {

@@ -8,6 +8,7 @@ second, before any worker is asked for anything."""
 from __future__ import annotations
 
 import csv
+import functools
 import glob
 import hashlib
 import itertools
@@ -437,13 +438,29 @@ def _slug(name: str, fallback: str = "set") -> str:
     return slug[:80]
 
 
+@functools.cache
+def estimator_source() -> str:
+    """A hash of the estimator's source files (``estimator/**/*.py``): the figures of a row are
+    those of the code that ran it."""
+    import estimator
+
+    root = Path(estimator.__file__).resolve().parent
+    digest = hashlib.sha256()
+    for f in sorted(root.rglob("*.py")):
+        digest.update(f.relative_to(root).as_posix().encode() + b"\0" + f.read_bytes() + b"\0")
+    return digest.hexdigest()[:16]
+
+
 def task_id(entry: LogEntry, s: ParamSet, topics: TopicChoice = AUTO_TOPICS) -> str:
     """A hash of everything a task's row depends on that the sweep knows: the log's and route's
-    paths, outages, topics, the method and the parameters as TOML. Renaming the set keeps it;
+    paths, outages, topics, the method, the parameters as TOML and the estimator's source
+    (:func:`estimator_source`: a sweep resumed after a code change runs again, instead of
+    keeping the earlier code's rows as if they were this code's). Renaming the set keeps it;
     changing a value or a file's path makes a new task."""
     key = json.dumps(
         [
             TASK_VERSION,
+            estimator_source(),
             str(entry.log.resolve()),
             None if entry.route is None else str(entry.route.resolve()),
             [list(o) for o in entry.outages],

@@ -215,3 +215,16 @@ def test_a_manifest_row_whose_log_or_route_is_missing_is_a_failed_member(tmp_pat
         f"{tmp_path / 'nowhere.geojson'}: no such route file (manifest m.csv, line 2)"
     )
     assert entries[1].route_error == f"{tmp_path / 'missing.mcap'}: no such file or folder"
+
+
+def test_a_code_change_makes_new_tasks(tmp_path, monkeypatch):
+    """Task ids ignored the code: the same command after a commit resumed every task, and a
+    regression run into the same folder compared the earlier code's rows with themselves."""
+    import inspector.fleet.plan as plan
+
+    (entry,) = collect_logs([str(_log(tmp_path))])
+    (s,) = build_sets([("method", "proposed")])
+    before = task_id(entry, s)
+    assert len(plan.estimator_source()) == 16 and task_id(entry, s) == before
+    monkeypatch.setattr(plan, "estimator_source", lambda: "another commit")
+    assert task_id(entry, s) != before
