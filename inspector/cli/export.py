@@ -149,6 +149,12 @@ def _compare(
     for label, va, vb in comparison.metrics:
         if va is not None and vb is not None:
             print(f"{label}: A {va:.3f}, B {vb:.3f} (B - A {signed(vb - va)})")
+    truth = [(va, vb) for label, va, vb in comparison.metrics if label.startswith("truth")]
+    if truth and all(va is None and vb is None for va, vb in truth):
+        print(
+            "no ground truth in this log: only the route deviation is compared, and it rewards "
+            "following the map"
+        )
     print(
         f"accepted A {comparison.accepted[0]} / {comparison.attempts[0]}, "
         f"B {comparison.accepted[1]} / {comparison.attempts[1]}; "
