@@ -109,7 +109,10 @@ def open_log_path(path: Path) -> tuple[LogReader, Path]:
     this is not a log."""
     check_log_exists(path)
     for fmt in LOG_FORMATS.values():
-        source = fmt.locate(path)
+        try:
+            source = fmt.locate(path)
+        except OSError as exc:  # a folder that cannot be looked into, a file not read
+            raise LogError(path, f"cannot open it ({exc.strerror or exc})") from None
         if source is not None:
             return fmt, source
     raise LogError(

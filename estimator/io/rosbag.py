@@ -75,12 +75,19 @@ def _starts_with(path: Path, magic: bytes, kind: str) -> Path:
         raise LogError(path, "file is empty")
     try:
         with path.open("rb") as fh:
-            head = fh.read(len(magic))
+            head = fh.read(max(len(m) for m in (magic, *_OTHER_FORMATS)))
     except OSError as exc:
         raise LogError(path, f"cannot open the file ({exc.strerror or exc})") from None
-    if head != magic:
+    if not head.startswith(magic):
+        for other, (what, suffix) in _OTHER_FORMATS.items():
+            if other != magic and head.startswith(other):
+                raise LogError(path, f"not a {kind}: it is {what} (name it {suffix})")
         raise LogError(path, f"not a {kind} (it does not start with {magic!r})")
     return path
+
+
+_OTHER_FORMATS = {MCAP_MAGIC: ("an MCAP file", ".mcap"), ROS1_MAGIC: ("a ROS 1 bag", ".bag")}
+"""the first bytes of each single-file format, to name a log given the other's suffix"""
 
 
 def _in_bag_folder(path: Path) -> bool:

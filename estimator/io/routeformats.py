@@ -49,6 +49,9 @@ def route_beside(log: str | Path) -> Path | None:
             if infix == "" and suffix == ".csv":
                 continue  # a bare <stem>.csv is as likely a data table as a route
             candidate = p.parent / f"{stem}{infix}{suffix}"
-            if candidate.is_file():
-                return candidate
+            try:
+                if candidate.is_file():
+                    return candidate
+            except OSError:  # a folder that cannot be looked into: no route found there
+                return None
     return None

@@ -66,9 +66,14 @@ def check_output_file(path: Path) -> None:
 
 def check_log_specs(specs: Iterable[str]) -> None:
     """Log arguments that are plain paths (not glob patterns) must exist: a missing one is
-    named as missing, not as a folder or glob that matched no log."""
-    from estimator.io.registry import check_log_exists
-
+    named as missing, not as a folder or glob that matched no log. One that exists but cannot
+    be looked at (no permission) is left to the sweep, whose row for it names the problem
+    while the other logs run."""
     for spec in specs:
         if GLOB_CHARACTERS.isdisjoint(spec):
-            check_log_exists(Path(spec).expanduser())
+            try:
+                Path(spec).expanduser().stat()
+            except FileNotFoundError:
+                raise RoutefuseError(spec, "no such file or folder") from None
+            except OSError:
+                pass

@@ -38,8 +38,8 @@ def add_arguments(parser: argparse.ArgumentParser) -> None:
         "--batch",
         metavar="DIR_OR_GLOB",
         help="export every log of a folder (or matching a quoted glob); each log's route is "
-        "<stem>.route.geojson beside it; the logs run as Dask tasks (routefuse sweep's engine) "
-        "and a second run skips the logs exported before",
+        "<stem>.route.* beside it (GeoJSON, GPX, KML or CSV); the logs run as Dask tasks "
+        "(routefuse sweep's engine) and a second run skips the logs exported before",
     )
     where = parser.add_mutually_exclusive_group()
     where.add_argument(
@@ -149,6 +149,12 @@ def _compare(
     for label, va, vb in comparison.metrics:
         if va is not None and vb is not None:
             print(f"{label}: A {va:.3f}, B {vb:.3f} (B - A {signed(vb - va)})")
+    truth = [(va, vb) for label, va, vb in comparison.metrics if label.startswith("truth")]
+    if truth and all(va is None and vb is None for va, vb in truth):
+        print(
+            "no ground truth in this log: only the route deviation is compared, and it rewards "
+            "following the map"
+        )
     print(
         f"accepted A {comparison.accepted[0]} / {comparison.attempts[0]}, "
         f"B {comparison.accepted[1]} / {comparison.attempts[1]}; "

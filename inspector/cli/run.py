@@ -183,6 +183,8 @@ def execute(args: argparse.Namespace) -> int:
     }
     print(format_table([(Path(args.log).name, method, m) for method, m in metrics.items()]))
     _print_notes(named, {m: match_summary(r) for m, r in named.items() if m != "baseline"})
+    if all(m.truth is None for m in metrics.values()):
+        print(NO_TRUTH)
     if args.json is not None:
         doc = results_document(
             args.log,
@@ -200,6 +202,12 @@ def execute(args: argparse.Namespace) -> int:
     if args.csv is not None:
         _write_csv(args.csv, named.values())
     return 0
+
+
+NO_TRUTH = (
+    "no ground truth in this log: the table gives the deviation from the route only, which "
+    "rewards following a wrong map (the accuracy needs a truth topic, *truth*)"
+)
 
 
 def _print_notes(runs: dict[str, Run], summaries: dict[str, dict[str, Any]]) -> None:

@@ -4,6 +4,7 @@ table (``results.parquet``, ``results.csv``) and ``report.html`` (:mod:`inspecto
 from __future__ import annotations
 
 import argparse
+from collections.abc import Mapping
 from pathlib import Path
 from typing import Any
 
@@ -13,6 +14,8 @@ from inspector.cli.checks import check_log_specs
 from inspector.cli.options import add_outage_option, add_topic_options, parse_outage
 
 NAME = "sweep"
+MAX_FAILURES_LISTED = 20
+"""failed tasks named one per line after the summary (the rest are in the table)"""
 HELP = (
     "run parameter sets (--config, --grid, --method) over many logs as Dask tasks, on this "
     "machine or a cluster, into one table (results.parquet, results.csv) and report.html with "
@@ -134,6 +137,12 @@ def execute(args: argparse.Namespace) -> int:
         from inspector.export.replay import ReplayOptions
 
         export = ReplayOptions()
+    failures: list[str] = []
+
+    def keep_failure(row: Mapping[str, Any]) -> None:
+        if row.get("status") != "ok" and len(failures) <= MAX_FAILURES_LISTED:
+            failures.append(f"failed: {Path(str(row['log'])).name} {row['set']}: {row['error']}")
+
     result = run_sweep(
         plan,
         Path(args.out),
@@ -142,6 +151,7 @@ def execute(args: argparse.Namespace) -> int:
         export=export,
         cache_dir=args.cache_dir,
         progress=QuietProgress() if args.quiet else TerminalProgress(),
+        on_row=keep_failure,
     )
     print(
         f"{result.total} tasks ({len(plan.logs)} logs x {len(plan.sets)} sets): "
@@ -151,4 +161,11 @@ def execute(args: argparse.Namespace) -> int:
     print(f"table: {result.parquet} and {result.csv.name}")
     if result.report is not None:
         print(f"report: {result.report}")
+    # the failed tasks are named here too, --quiet or not: a CI log shows what exit 2 means
+    for line in failures[:MAX_FAILURES_LISTED]:
+        print(line)
+    if result.failed > MAX_FAILURES_LISTED:
+        print(
+            f"... and {result.failed - MAX_FAILURES_LISTED} more failed tasks ({result.csv.name})"
+        )
     return 2 if result.failed else 0

@@ -116,10 +116,19 @@ def _delta(va: float | None, vb: float | None) -> str:
 
 
 def write_comparison(
-    out: Path, comparison: Comparison, params_a: Params, params_b: Params, names: Sequence[str]
+    out: Path,
+    comparison: Comparison,
+    params_a: Params,
+    params_b: Params,
+    names: Sequence[str],
+    *,
+    log: Path | None = None,
+    route: Path | None = None,
+    method: str | None = None,
 ) -> tuple[Path, ...]:
     """``compare_metrics.csv``, ``changed_verdicts.csv``, ``compare.html`` and the two sets as
-    ``set_a.toml`` / ``set_b.toml``; returns the paths."""
+    ``set_a.toml`` / ``set_b.toml``; returns the paths. The page names the ``log``, ``route``
+    and ``method`` compared on (a page mailed on its own says what it is about)."""
     metrics_csv = out / "compare_metrics.csv"
     with open(metrics_csv, "w", newline="", encoding="utf-8") as f:
         w = csv.writer(f)
@@ -146,7 +155,7 @@ def write_comparison(
     toml_a.write_text(params_to_toml(params_a), encoding="utf-8")
     toml_b.write_text(params_to_toml(params_b), encoding="utf-8")
     page = out / "compare.html"
-    page.write_text(_page(comparison, names), encoding="utf-8")
+    page.write_text(_page(comparison, names, log, route, method), encoding="utf-8")
     return metrics_csv, changed_csv, toml_a, toml_b, page
 
 
@@ -170,9 +179,29 @@ def _gate_row(g: GateDecision) -> str:
     )
 
 
-def _page(c: Comparison, names: Sequence[str]) -> str:
+def _page(
+    c: Comparison,
+    names: Sequence[str],
+    log: Path | None = None,
+    route: Path | None = None,
+    method: str | None = None,
+) -> str:
     esc = html.escape
     a_name, b_name = (esc(n) for n in names)
+    about = []
+    if log is not None:
+        about.append(f"log <code>{esc(str(log))}</code>")
+    if route is not None:
+        about.append(f"route <code>{esc(str(route))}</code>")
+    if method is not None:
+        about.append(f"method {esc(method)}")
+    if all(va is None and vb is None for label, va, vb in c.metrics if label.startswith("truth")):
+        about.append(
+            "no ground truth in this log: only the route deviation, which rewards following "
+            "the map, is compared"
+        )
+    context = f"<p>{'<br>'.join(about)}</p>" if about else ""
+    title = f"{esc(log.name)}: " if log is not None else ""
     metric_rows = "".join(
         f"<tr><td>{esc(label)}</td><td>{_fmt(va)}</td><td>{_fmt(vb)}</td>"
         f"<td>{_delta(va, vb)}</td></tr>"
@@ -184,7 +213,7 @@ def _page(c: Comparison, names: Sequence[str]) -> str:
         for x in c.changed
     )
     return f"""<!DOCTYPE html>
-<html lang="en"><head><meta charset="utf-8"><title>routefuse: {a_name} vs {b_name}</title>
+<html lang="en"><head><meta charset="utf-8"><title>routefuse: {title}{a_name} vs {b_name}</title>
 <style>
 body {{ font-family: system-ui, sans-serif; margin: 2em auto; max-width: 1200px; color: #222; }}
 table {{ border-collapse: collapse; margin-bottom: 1em; }}
@@ -193,6 +222,7 @@ th:first-child, td:first-child {{ text-align: left; }}
 td.side table {{ margin: 0; }}
 </style></head><body>
 <h1>A: {a_name} &nbsp;vs&nbsp; B: {b_name}</h1>
+{context}
 <h2>Metrics over the GNSS-degraded intervals</h2>
 <table><tr><th>quantity</th><th>A</th><th>B</th><th>B - A</th></tr>{metric_rows}
 <tr><td>match attempts</td><td>{c.attempts[0]}</td><td>{c.attempts[1]}</td><td></td></tr>
@@ -233,5 +263,12 @@ def export_comparison(
     comparison = compare_runs(a, b, docs[0], docs[1])
     make_dir(out)
     return comparison, write_comparison(
-        out, comparison, params_a, params_b, (set_a.name, set_b.name)
+        out,
+        comparison,
+        params_a,
+        params_b,
+        (set_a.name, set_b.name),
+        log=log,
+        route=route,
+        method=method,
     )

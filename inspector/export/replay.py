@@ -17,8 +17,11 @@ import contextlib
 import dataclasses
 import io
 import math
+import os
+import shutil
 import socket
 import time
+import uuid
 from collections.abc import Callable, Iterator, Sequence
 from dataclasses import dataclass, field
 from importlib import resources
@@ -116,55 +119,70 @@ def export_log(
     log_path, route_path, out = Path(log_path), Path(route_path), Path(out_dir)
     params = params or Params()
     _check_replay_options(replay)
+    created = not out.exists()
     make_dir(out)  # before the runs: a bad --out fails at once
-    steps = _Stages(progress or (lambda stage, fraction: None))
-    stage, lap = steps.stage, steps.lap
-    inputs = open_inputs(
-        log_path,
-        route_path,
-        topics=topics,
-        route_feature=route_feature,
-        cache_dir=cache_dir,
-        progress=stage("loading", 0, 0.2),
-    )
-    lap("load_s")
-    stages = {
-        "baseline": stage("baseline run", 0.2, 0.35),
-        method: stage(f"{method} run", 0.35, 0.55),
-    }
-    session = run_methods(
-        inputs,
-        params,
-        methods=("baseline", method),
-        outages=outages,
-        progress=lambda m, f: stages[m](f),
-    )
-    baseline, compared = session["baseline"], session[method]
-    lap("run_s")
-    doc = export_tables.metrics_document(
-        inputs,
-        baseline,
-        compared,
-        log_path,
-        route_path,
-        outages=outages,
-        subtract_lane_offset=subtract_lane_offset,
-    )
     try:
-        files, n_frames = _write_files(out, inputs, baseline, compared, doc, replay, steps)
-    except OSError as exc:
-        where = exc.filename or out
-        raise RoutefuseError(where, f"cannot write: {exc.strerror or exc}") from None
-    steps.report("done", 1.0)
-    return ExportResult(
-        log=log_path,
-        route=route_path,
-        out_dir=out,
-        files=files,
-        metrics=doc,
-        frames=n_frames,
-        timings=steps.timings,
-    )
+        steps = _Stages(progress or (lambda stage, fraction: None))
+        stage, lap = steps.stage, steps.lap
+        inputs = open_inputs(
+            log_path,
+            route_path,
+            topics=topics,
+            route_feature=route_feature,
+            cache_dir=cache_dir,
+            progress=stage("loading", 0, 0.2),
+        )
+        lap("load_s")
+        stages = {
+            "baseline": stage("baseline run", 0.2, 0.35),
+            method: stage(f"{method} run", 0.35, 0.55),
+        }
+        session = run_methods(
+            inputs,
+            params,
+            methods=("baseline", method),
+            outages=outages,
+            progress=lambda m, f: stages[m](f),
+        )
+        baseline, compared = session["baseline"], session[method]
+        lap("run_s")
+        doc = export_tables.metrics_document(
+            inputs,
+            baseline,
+            compared,
+            log_path,
+            route_path,
+            outages=outages,
+            subtract_lane_offset=subtract_lane_offset,
+        )
+        # written into a hidden folder of ``out`` and moved into place once every file is there:
+        # stopped midway (Ctrl-C, an error), ``out`` keeps the earlier export whole, or nothing,
+        # never this export's first files beside that one's replay and report
+        staging = out / f".partial-{uuid.uuid4().hex[:12]}"
+        try:
+            make_dir(staging)
+            files, n_frames = _write_files(staging, inputs, baseline, compared, doc, replay, steps)
+            files = _publish(files, out)
+        except OSError as exc:
+            where = exc.filename or out
+            raise RoutefuseError(where, f"cannot write: {exc.strerror or exc}") from None
+        finally:
+            shutil.rmtree(staging, ignore_errors=True)
+        steps.report("done", 1.0)
+        return ExportResult(
+            log=log_path,
+            route=route_path,
+            out_dir=out,
+            files=files,
+            metrics=doc,
+            frames=n_frames,
+            timings=steps.timings,
+        )
+    except BaseException:
+        if created:  # a log that failed leaves no empty folder that looks like its export
+            with contextlib.suppress(OSError):
+                out.rmdir()
+        raise
 
 
 @dataclass
@@ -219,6 +237,15 @@ def _write_files(
     steps.lap("replay_s")
     files += (export_tables.write_report(out, doc, files, steps.timings),)
     return files, len(frames)
+
+
+def _publish(files: Sequence[Path], out: Path) -> tuple[Path, ...]:
+    """Move the written ``files`` into ``out`` (each replacing its earlier version), the report
+    page, which links the rest, last."""
+    ordered = sorted(files, key=lambda f: f.name == "report.html")
+    for f in ordered:
+        os.replace(f, out / f.name)
+    return tuple(out / f.name for f in files)
 
 
 def make_dir(path: Path) -> None:
@@ -370,12 +397,24 @@ def write_replay(
         title=title,
         method=method,
     )
+    html = _with_title(html, f"routefuse replay: {title}")
     body_end = html.rindex("</body>")
     html_path.write_text(html[:body_end] + panel + html[body_end:], encoding="utf-8")
     viser_path.write_bytes(data)
     if progress is not None:
         progress(1.0)
     return html_path, viser_path
+
+
+def _with_title(page: str, title: str) -> str:
+    """viser's page with ``title`` (escaped) instead of its own "Viser", so that a browser tab,
+    its history and a bookmark name the log replayed."""
+    import html as html_text
+
+    start, end = page.find("<title>"), page.find("</title>")
+    if start < 0 or end < start:
+        return page
+    return page[: start + len("<title>")] + html_text.escape(title) + page[end:]
 
 
 PLAYBACK_SPEEDS = (1.0, 2.0, 5.0, 10.0, 20.0, 50.0, 100.0, 200.0)

@@ -445,19 +445,43 @@ def write_summary(path: Path, items: Sequence[BatchItem]) -> Path:
 
 
 def format_summary(items: Sequence[BatchItem]) -> str:
-    """The summary as a text table for the terminal (errors on their own lines below)."""
-    cols = ("log", "status", "outage_s", "attempts", "accepted", "baseline_rmse_pos_dev_m",
-            "proposed_rmse_pos_dev_m", "seconds")  # fmt: skip
-    titles = ("log", "status", "outage [s]", "attempts", "accepted", "baseline RMSE [m]",
-              "proposed RMSE [m]", "time [s]")  # fmt: skip
+    """The summary as a text table for the terminal (errors on their own lines below): per
+    method the error against ground truth beside the route deviation (a route deviation alone
+    rewards following a wrong map), both RMSE over the GNSS outages."""
+    method = next(
+        (list(it.result.metrics["methods"])[-1] for it in items if it.result is not None),
+        "proposed",
+    )
+    columns = (
+        ("log", "log"),
+        ("status", "status"),
+        ("outage_s", "outage [s]"),
+        ("attempts", "attempts"),
+        ("accepted", "accepted"),
+        ("baseline_rmse_h_err_m", "baseline truth RMSE [m]"),
+        ("proposed_rmse_h_err_m", f"{method} truth RMSE [m]"),
+        ("baseline_rmse_pos_dev_m", "baseline route dev. RMSE [m]"),
+        ("proposed_rmse_pos_dev_m", f"{method} route dev. RMSE [m]"),
+        ("seconds", "time [s]"),
+    )
+    figures = {"outage_s", "baseline_rmse_h_err_m", "proposed_rmse_h_err_m",
+               "baseline_rmse_pos_dev_m", "proposed_rmse_pos_dev_m"}  # fmt: skip
     rows = summary_rows(items)
-    body = [[Path(r["log"]).name if c == "log" else r[c] for c in cols] for r in rows]
-    for r in body:
-        for i in (2, 5, 6):
-            r[i] = f"{float(r[i]):.2f}" if r[i] else "-"
+    titles = [t for _, t in columns]
+    body = []
+    for r in rows:
+        cells = []
+        for key, _ in columns:
+            v = Path(r["log"]).name if key == "log" else r[key]
+            cells.append((f"{float(v):.2f}" if v else "-") if key in figures else v)
+        body.append(cells)
     widths = [max(len(x) for x in col) for col in zip(titles, *body, strict=True)]
     lines = ["  ".join(t.ljust(w) for t, w in zip(titles, widths, strict=True)).rstrip()]
     lines += ["  ".join(c.ljust(w) for c, w in zip(r, widths, strict=True)).rstrip() for r in body]
+    lines.append(
+        "RMSE over the GNSS outages; truth: error against ground truth (- where the log has "
+        "none); route dev.: position deviation from the route line"
+    )
     lines += [f"failed: {r['error']}" for r in rows if r["error"]]
     lines += [f"warning: {Path(r['log']).name}: {r['warnings']}" for r in rows if r["warnings"]]
     return "\n".join(lines)

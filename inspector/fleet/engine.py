@@ -49,8 +49,10 @@ import json
 import logging
 import os
 import resource
+import signal
 import socket
 import sys
+import threading
 import time
 import uuid
 from collections import deque
@@ -62,7 +64,7 @@ from typing import TYPE_CHECKING, Any, Literal, Protocol
 from estimator.errors import RoutefuseError
 from estimator.io import TopicChoice
 from estimator.params import params_to_toml
-from inspector.fleet.plan import SweepPlan, Task, format_values
+from inspector.fleet.plan import SweepPlan, Task, estimator_source, format_values
 from inspector.fleet.table import failed_row, one_line, read_task_file, task_row
 
 if TYPE_CHECKING:
@@ -74,6 +76,8 @@ if TYPE_CHECKING:
 ExportLayout = Literal["by-set", "flat"]
 """where a task's replay export goes: ``exports/<set>/<log>/`` or ``<log>/`` (one set)"""
 
+STALE_OUTPUTS = ("results.parquet", "results.csv", "report.html", "summary.csv")
+"""what a sweep or a batch export writes once all its tasks are done"""
 CONNECT_TIMEOUT_S = 30.0
 WORKERS_TIMEOUT_S = 60.0
 
@@ -395,18 +399,35 @@ def open_client(*, workers: int | None, scheduler: str | None) -> Iterator[Clien
     n = workers if workers is not None else (os.cpu_count() or 1)
     if n < 1:
         raise RoutefuseError("--workers", f"{n}: at least one worker")
-    cluster = LocalCluster(
-        n_workers=n,
-        threads_per_worker=1,
-        processes=True,
-        dashboard_address=":0",
-        silence_logs=logging.ERROR,
-    )
+    with _workers_ignore_ctrl_c():
+        cluster = LocalCluster(
+            n_workers=n,
+            threads_per_worker=1,
+            processes=True,
+            dashboard_address=":0",
+            silence_logs=logging.ERROR,
+        )
     try:
         with Client(cluster) as client:
             yield client
     finally:
         cluster.close()
+
+
+@contextlib.contextmanager
+def _workers_ignore_ctrl_c() -> Iterator[None]:
+    """SIGINT ignored while the local worker processes start, so they inherit it ignored: Ctrl-C
+    on the terminal reaches the whole process group, and the workers, interrupted mid-task,
+    printed a KeyboardInterrupt traceback each; only the client is to stop, and it closes the
+    cluster (its workers with it)."""
+    if threading.current_thread() is not threading.main_thread():
+        yield
+        return
+    previous = signal.signal(signal.SIGINT, signal.SIG_IGN)
+    try:
+        yield
+    finally:
+        signal.signal(signal.SIGINT, previous)
 
 
 def dashboard_link(client: Client) -> str | None:
@@ -431,6 +452,12 @@ def prepare_output(plan: SweepPlan, layout: SweepLayout) -> None:
         raise RoutefuseError(
             out, f"cannot create the output folder: {exc.strerror or exc}"
         ) from None
+    # the table and report of an earlier run are written again at the end from every task
+    # file: removed now, so that a run stopped midway (Ctrl-C) leaves none that looks like
+    # this run's (the finished tasks' files stay, and the next run resumes from them)
+    for stale in STALE_OUTPUTS:
+        with contextlib.suppress(FileNotFoundError):
+            (out / stale).unlink()
     for s in plan.sets:
         layout.set_config(s.slug).write_text(
             f"# routefuse sweep set {s.name!r} (method {s.method}, from {s.source})\n"
@@ -438,6 +465,7 @@ def prepare_output(plan: SweepPlan, layout: SweepLayout) -> None:
             encoding="utf-8",
         )
     doc = {
+        "estimator_source": estimator_source(),
         "reference": plan.reference.name,
         "sets": [
             {

@@ -8,6 +8,7 @@ second, before any worker is asked for anything."""
 from __future__ import annotations
 
 import csv
+import functools
 import glob
 import hashlib
 import itertools
@@ -60,11 +61,24 @@ class LogEntry:
     """unique within the plan: the log's stem, ``-2`` ... on a clash (a folder name)"""
     outages: Outages = ()
     tags: tuple[str, ...] = ()
+    route_problem: str = ""
+    """why ``route`` is None when a manifest named one (it does not exist)"""
 
     @property
     def route_error(self) -> str | None:
+        """Why this log's tasks cannot run for want of a route (None: it has one). A log that
+        cannot be opened either is named for its own problem (unreadable, empty, not a log),
+        as ``routefuse run`` does, not as a log without a route."""
         if self.route is not None:
             return None
+        from estimator.io.registry import open_log_path
+
+        try:
+            open_log_path(self.log)
+        except RoutefuseError as exc:
+            return " ".join(str(exc).split())
+        if self.route_problem:
+            return self.route_problem
         stem = self.log.name.split(".")[0]
         return (
             f"{self.log}: no route {stem}.route.geojson beside the log "
@@ -155,8 +169,16 @@ def find_logs(spec: str | Path) -> list[Path]:
     """The logs a folder holds (what the log-format registry recognises directly in it), or
     whatever a glob pattern matches (route files left out)."""
     p = Path(spec).expanduser()
-    if p.is_dir():
-        found = [c for c in sorted(p.iterdir()) if is_log_path(c)]
+    try:
+        folder = p.is_dir()
+    except OSError:  # a glob inside a folder that cannot be looked into: it matches nothing
+        folder = False
+    if folder:
+        try:
+            children = sorted(p.iterdir())
+        except OSError as exc:
+            raise RoutefuseError(spec, f"cannot list the folder ({exc.strerror or exc})") from None
+        found = [c for c in children if _may_be_log(c)]
     else:
         found = [Path(m) for m in sorted(glob.glob(str(p)))]
         found = [m for m in found if not is_route_path(m)]
@@ -165,6 +187,16 @@ def find_logs(spec: str | Path) -> list[Path]:
             spec, f"no logs found (expected a folder holding {LOG_FORMATS_TEXT}, or a glob)"
         )
     return found
+
+
+def _may_be_log(path: Path) -> bool:
+    """Whether ``path`` is a log (:func:`estimator.io.is_log_path`), or a folder that cannot be
+    looked into (no permission): kept, so that its task fails naming the problem instead of the
+    folder being skipped without a word or the whole sweep stopping."""
+    try:
+        return is_log_path(path)
+    except OSError:
+        return True
 
 
 def is_manifest(path: Path) -> bool:
@@ -206,12 +238,14 @@ def read_manifest(path: Path) -> list[LogEntry]:
         row = {(k or "").strip().lower(): (v or "").strip() for k, v in raw.items()}
         if not row.get("log"):
             raise ConfigError(path, f"line {n}: no log")
+        # a row whose log or route is missing is a member whose tasks fail naming it (the
+        # rest of a nightly manifest runs), not the end of the sweep
         log = _resolve(base, row["log"])
-        if not log.exists():
-            raise ConfigError(path, f"line {n}: {row['log']}: no such file or folder")
         route = _resolve(base, row["route"]) if row.get("route") else route_beside(log)
+        problem = ""
         if route is not None and not route.is_file():
-            raise ConfigError(path, f"line {n}: {row['route']}: no such route file")
+            problem = f"{route}: no such route file (manifest {path.name}, line {n})"
+            route = None
         try:
             outages = tuple(
                 parse_outage(o) for o in row.get("outages", "").replace(",", " ").split()
@@ -219,7 +253,7 @@ def read_manifest(path: Path) -> list[LogEntry]:
         except ConfigError as exc:
             raise ConfigError(path, f"line {n}: outages {exc.problem}") from None
         tags = tuple(t for t in re.split(r"[;\s]+", row.get("tags", "")) if t)
-        entries.append(LogEntry(log, route, "", outages, tags))
+        entries.append(LogEntry(log, route, "", outages, tags, problem))
     if not entries:
         raise ConfigError(path, "the manifest lists no log")
     return entries
@@ -243,22 +277,28 @@ def collect_logs(
         if is_manifest(p):
             entries.extend(read_manifest(p))
             continue
-        logs = [p] if p.exists() and is_log_path(p) else find_logs(spec)
+        try:
+            named = p.exists() and _may_be_log(p)
+        except OSError:  # inside a folder that cannot be looked into: a glob matches nothing
+            named = not any(c in str(spec) for c in "*?[")  # a path: a member named for it
+        logs = [p] if named else find_logs(spec)
         entries.extend(LogEntry(log, route_beside(log), "") for log in logs)
     unique: dict[tuple[str, Outages], LogEntry] = {}
     for e in entries:
         route = None if e.route is None else e.route.absolute()
-        e = LogEntry(e.log.absolute(), route, "", e.outages or default_outages, e.tags)
+        e = LogEntry(
+            e.log.absolute(), route, "", e.outages or default_outages, e.tags, e.route_problem
+        )
         unique.setdefault((str(e.log.resolve()), e.outages), e)
     used: set[str] = set()
     labelled = []
     for e in unique.values():
-        name = _slug(e.log.name.split(".")[0] or "log")
+        name = _slug(e.log.name.split(".")[0], "log")
         label, k = name, 2
         while label in used:
             label, k = f"{name}-{k}", k + 1
         used.add(label)
-        labelled.append(LogEntry(e.log, e.route, label, e.outages, e.tags))
+        labelled.append(LogEntry(e.log, e.route, label, e.outages, e.tags, e.route_problem))
     return tuple(labelled)
 
 
@@ -391,19 +431,36 @@ def _text(v: Any) -> str:
     return str(v)
 
 
-def _slug(name: str) -> str:
-    """A file-name-safe form: letters, digits, ``. _ = , + -``; the rest replaced by ``_``."""
-    slug = re.sub(r"[^A-Za-z0-9._=,+-]+", "_", name).strip("._") or "set"
+def _slug(name: str, fallback: str = "set") -> str:
+    """A file-name-safe form: letters and digits of any script, ``. _ = , + -``; the rest
+    (spaces, slashes, markup) replaced by ``_``; ``fallback`` when nothing is left."""
+    slug = re.sub(r"[^\w.=,+-]+", "_", name).strip("._") or fallback
     return slug[:80]
+
+
+@functools.cache
+def estimator_source() -> str:
+    """A hash of the estimator's source files (``estimator/**/*.py``): the figures of a row are
+    those of the code that ran it."""
+    import estimator
+
+    root = Path(estimator.__file__).resolve().parent
+    digest = hashlib.sha256()
+    for f in sorted(root.rglob("*.py")):
+        digest.update(f.relative_to(root).as_posix().encode() + b"\0" + f.read_bytes() + b"\0")
+    return digest.hexdigest()[:16]
 
 
 def task_id(entry: LogEntry, s: ParamSet, topics: TopicChoice = AUTO_TOPICS) -> str:
     """A hash of everything a task's row depends on that the sweep knows: the log's and route's
-    paths, outages, topics, the method and the parameters as TOML. Renaming the set keeps it;
+    paths, outages, topics, the method, the parameters as TOML and the estimator's source
+    (:func:`estimator_source`: a sweep resumed after a code change runs again, instead of
+    keeping the earlier code's rows as if they were this code's). Renaming the set keeps it;
     changing a value or a file's path makes a new task."""
     key = json.dumps(
         [
             TASK_VERSION,
+            estimator_source(),
             str(entry.log.resolve()),
             None if entry.route is None else str(entry.route.resolve()),
             [list(o) for o in entry.outages],

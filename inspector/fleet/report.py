@@ -76,9 +76,11 @@ def read_rows(parquet: Path) -> list[dict[str, Any]]:
 
 def write_report(plan: SweepPlan, layout: SweepLayout, parquet: Path) -> Path:
     path = layout.out / "report.html"
-    path.write_text(
+    tmp = path.with_name(".report.html.tmp")
+    tmp.write_text(
         report_html(plan, read_rows(parquet), layout=layout, base=layout.out), encoding="utf-8"
     )
+    tmp.replace(path)  # whole or not at all
     return path
 
 
@@ -102,7 +104,7 @@ def report_html(
         _sets_table(plan, rows, layout, metric),
         _distributions(plan, ok),
         _ranked(plan, ok, layout, base, metric),
-        _delta_table(plan, ok, metric),
+        *_per_log(plan, ok, metric),
         _failures(failed),
         "</body></html>\n",
     ]
@@ -273,10 +275,50 @@ def serve_command(row: Mapping[str, Any], config: Path) -> str:
     return shlex.join(words)
 
 
-def _delta_table(plan: SweepPlan, ok: Sequence[Mapping[str, Any]], metric: str) -> str:
+def _per_log(plan: SweepPlan, ok: Sequence[Mapping[str, Any]], metric: str) -> list[str]:
+    """The per-log table by ``metric``; with truth as the metric, the logs without ground truth
+    get a table of their own by the route deviation, said to be that (they used to be a row of
+    dashes in the truth table, their change shown nowhere); without truth anywhere, a warning
+    that the route deviation is all there is."""
+    if len(plan.sets) < 2:
+        return []
+    if metric == ROUTE_METRIC:
+        return [
+            "<p><b>No log has ground truth</b>: logs are compared by their position deviation "
+            "from the route, which rewards following a wrong map; open the worst in the "
+            "inspector before trusting a change.</p>",
+            _delta_table(plan, ok, metric),
+        ]
+    with_truth = {r["label"] for r in ok if _finite(r.get(metric))}
+    parts = [_delta_table(plan, [r for r in ok if r["label"] in with_truth], metric)]
+    without = [r for r in ok if r["label"] not in with_truth]
+    if without:
+        parts.append(
+            _delta_table(
+                plan,
+                without,
+                ROUTE_METRIC,
+                title=f"Logs without ground truth ({len({r['label'] for r in without})}): "
+                f"change of {_TITLES[ROUTE_METRIC]} from the route",
+                note="Not in the rankings above, which use the error against ground truth. A "
+                "route deviation rewards following a wrong map: a smaller one is not "
+                "necessarily better.",
+            )
+        )
+    return parts
+
+
+def _delta_table(
+    plan: SweepPlan,
+    ok: Sequence[Mapping[str, Any]],
+    metric: str,
+    *,
+    title: str | None = None,
+    note: str = "",
+) -> str:
     esc = html.escape
     others = [s.name for s in plan.sets[1:]]
-    if not others:
+    if not others or not ok:
         return ""
     ref_name = plan.reference.name
     by_log: dict[str, dict[str, Any]] = {}
@@ -302,9 +344,10 @@ def _delta_table(plan: SweepPlan, ok: Sequence[Mapping[str, Any]], metric: str) 
         else ""
     )
     head = "".join(f"<th>{esc(_short(n))}</th>" for n in others)
+    heading = title or f"Per log: change of {_TITLES[metric]} against {ref_name}"
     return (
-        f"<h2>Per log: change of {esc(_TITLES[metric])} against "
-        f"{esc(ref_name)}</h2><table><tr><th>log</th><th>{esc(_short(ref_name))} [m]</th>"
+        f"<h2>{esc(heading)}</h2>" + (f"<p>{esc(note)}</p>" if note else "") + "<table><tr>"
+        f"<th>log</th><th>{esc(_short(ref_name))} [m]</th>"
         f"{head}</tr>\n" + "\n".join(body) + "</table>" + more
     )
 

@@ -14,8 +14,11 @@ holds every row."""
 
 from __future__ import annotations
 
+import contextlib
 import csv
+import itertools
 import json
+import os
 from collections.abc import Iterable, Iterator, Mapping, Sequence
 from dataclasses import fields
 from pathlib import Path
@@ -232,22 +235,33 @@ def write_table(
     kinds = {str: pa.string(), int: pa.int64(), float: pa.float64(), bool: pa.bool_()}
     schema = pa.schema([(name, kinds[tp]) for name, tp in columns])
     parquet, text = out_dir / "results.parquet", out_dir / "results.csv"
+    # written under temporary names and renamed once whole: an interrupted write leaves no
+    # table that looks complete
+    parquet_tmp, text_tmp = (p.with_name(f".{p.name}.tmp") for p in (parquet, text))
     names = [name for name, _ in columns]
-    with (
-        pq.ParquetWriter(parquet, schema) as writer,
-        text.open("w", newline="", encoding="utf-8") as fh,
-    ):
-        out = csv.writer(fh)
-        out.writerow(names)
-        chunk: list[Mapping[str, Any]] = []
-        for row in [*rows, None]:
-            if row is not None:
-                chunk.append(row)
-            if chunk and (row is None or len(chunk) >= CHUNK_ROWS):
-                data = {name: [_typed(r.get(name), tp) for r in chunk] for name, tp in columns}
-                writer.write_table(pa.table(data, schema=schema))
-                out.writerows([_csv_cell(r.get(n)) for n in names] for r in chunk)
-                chunk = []
+    try:
+        with (
+            pq.ParquetWriter(parquet_tmp, schema) as writer,
+            text_tmp.open("w", newline="", encoding="utf-8") as fh,
+        ):
+            out = csv.writer(fh)
+            out.writerow(names)
+            chunk: list[Mapping[str, Any]] = []
+            for row in itertools.chain(rows, [None]):  # streamed: one chunk in memory
+                if row is not None:
+                    chunk.append(row)
+                if chunk and (row is None or len(chunk) >= CHUNK_ROWS):
+                    data = {name: [_typed(r.get(name), tp) for r in chunk] for name, tp in columns}
+                    writer.write_table(pa.table(data, schema=schema))
+                    out.writerows([_csv_cell(r.get(n)) for n in names] for r in chunk)
+                    chunk = []
+    except BaseException:
+        for tmp in (parquet_tmp, text_tmp):
+            with contextlib.suppress(OSError):
+                tmp.unlink()
+        raise
+    os.replace(parquet_tmp, parquet)
+    os.replace(text_tmp, text)
     return parquet, text
 
 

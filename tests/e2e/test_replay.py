@@ -228,3 +228,25 @@ def test_the_legend_names_every_colour(page):
 
     shown = page.locator("#rf-legend li").all_text_contents()
     assert [s.strip() for s in shown] == [meaning for _, meaning in legend_entries()]
+
+
+def test_the_page_title_names_the_log_escaped(tmp_path, browser):
+    """The replay's browser tab said "Viser" whatever the log: ten replays open were ten tabs
+    of the same name. It names the log and route, as text."""
+    from estimator.sim import simulate
+    from inspector.export import ReplayOptions, export_log
+
+    log, route = simulate("short_tunnel", seed=1, duration_s=60.0).write(tmp_path)
+    hostile = tmp_path / "tunnel <b>x<b> & é.mcap"  # no "/" in a file name
+    Path(log).rename(hostile)
+    result = export_log(hostile, route, tmp_path / "export", replay=ReplayOptions(max_frames=20))
+    context = browser.new_context(viewport=VIEWPORT, offline=True)
+    page = context.new_page()
+    page.set_default_timeout(TIMEOUT_MS)
+    page.goto((result.out_dir / "replay.html").as_uri())
+    page.wait_for_selector("body[data-replay-ready=true]")
+    name = f"{hostile.name} on {Path(route).name}"
+    assert page.title() == f"routefuse replay: {name}"
+    assert page.locator("h1", has_text="tunnel").first.inner_text() == name
+    assert page.locator("h1 b").count() == 0  # the name's markup is text, not bold
+    context.close()

@@ -90,3 +90,12 @@ def test_what_is_not_a_log(tmp_path: Path) -> None:
         open_log_path(tmp_path / "plain")
     with pytest.raises(LogError, match="no such file or folder"):
         open_log_path(tmp_path / "missing.mcap")
+
+
+def test_a_folder_that_cannot_be_looked_into_is_a_one_line_log_error(tmp_path: Path, unreadable):
+    locked = tmp_path / "bag"
+    locked.mkdir()
+    (locked / "metadata.yaml").write_text("x")
+    unreadable(locked)
+    with pytest.raises(LogError, match=r"bag: cannot open it \(Permission denied\)$"):
+        open_log_path(locked)

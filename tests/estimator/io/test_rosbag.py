@@ -299,6 +299,17 @@ def _quat_from_matrix(r: np.ndarray) -> tuple[float, float, float, float]:
         ("text.bag", b"hello, not a bag\n", "not a ROS 1 bag"),
         ("text.mcap", b"hello\n", "not a ROS 2 bag / mcap file"),
         ("log.txt", b"hello\n", "unknown log format '.txt'"),
+        # a log given the other format's suffix is named for what it is
+        (
+            "drive.bag",
+            b"\x89MCAP0\r\n" + b"x" * 20,
+            "not a ROS 1 bag: it is an MCAP file (name it .mcap)",
+        ),
+        (
+            "drive.mcap",
+            b"#ROSBAG V2.0\n" + b"x" * 20,
+            "not a ROS 2 bag / mcap file: it is a ROS 1 bag (name it .bag)",
+        ),
     ],
 )
 def test_not_a_bag(tmp_path: Path, name: str, content: bytes, problem: str) -> None:

@@ -248,3 +248,30 @@ def test_compare_prints_no_negative_zero_and_uses_the_route_beside(
     assert out[0] == "RMSE [m]: A 0.300, B 0.300 (B - A 0.000)"
     assert out[1] == "max [m]: A 1.000, B 1.250 (B - A +0.250)"
     assert given == [route]
+    assert not any("no ground truth" in line for line in out)
+
+
+def test_compare_without_truth_says_the_route_deviation_is_all_it_compares(
+    bag, tmp_path, monkeypatch, capsys
+):
+    """Without ground truth the terminal printed the route deviation alone, as if it were the
+    accuracy."""
+    from types import SimpleNamespace
+
+    import inspector.export.compare
+
+    log, _ = bag
+
+    def fake_comparison(log_path, route_path, out, set_a, set_b, **kwargs):
+        metrics = [
+            ("truth horizontal RMSE [m]", None, None),
+            ("route deviation RMSE [m]", 1.0, 0.5),
+        ]
+        return SimpleNamespace(metrics=metrics, accepted=(3, 3), attempts=(5, 5), changed=()), ()
+
+    monkeypatch.setattr(inspector.export.compare, "export_comparison", fake_comparison)
+    argv = ["export", str(log), "--out", str(tmp_path / "o"), "--compare", "a.toml", "b.toml"]
+    assert main(argv) == 0
+    out = capsys.readouterr().out.splitlines()
+    assert out[0] == "route deviation RMSE [m]: A 1.000, B 0.500 (B - A -0.500)"
+    assert out[1].startswith("no ground truth in this log: only the route deviation")

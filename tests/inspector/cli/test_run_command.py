@@ -244,3 +244,20 @@ def test_a_folder_given_as_route_is_named_a_folder(bag, tmp_path, capsys, no_est
     assert main(["run", str(log), "--route", str(folder)]) == 2
     err = capsys.readouterr().err
     assert err == f"routefuse: error: {folder}: is a folder, expected a route file\n"
+
+
+def test_a_log_without_truth_says_the_table_is_route_deviation_only(bag, tmp_path, capsys):
+    """The table of a log without ground truth had no truth columns and no word about it: the
+    route deviation read as the accuracy."""
+    from estimator.io import load_log, write_bag
+
+    log, route = bag
+    sim = load_log(log, cache_dir=tmp_path / "c")
+    bare = tmp_path / "bare.mcap"
+    write_bag(bare, imu=sim.imu, gnss=sim.gnss, wheel=sim.wheel)
+    assert main(["run", str(bare), "--route", str(route), "--quiet"]) == 0
+    assert "no ground truth in this log: the table gives the deviation from the route only" in (
+        capsys.readouterr().out
+    )
+    assert main(["run", str(log), "--route", str(route), "--quiet"]) == 0
+    assert "no ground truth" not in capsys.readouterr().out

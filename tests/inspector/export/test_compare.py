@@ -73,3 +73,29 @@ def test_the_difference_of_two_equal_figures_is_written_without_a_sign() -> None
     assert _delta(1.0, 1.25) == "+0.250" and _delta(1.25, 1.0) == "-0.250"
     assert _delta(None, 1.0) == "" and _delta(1.0, float("nan")) == "nan"
     assert _signed(0.3 - (0.1 + 0.2)) == "0.000" and _signed(-0.5) == "-0.500"
+
+
+def test_the_compare_page_names_the_log_route_and_method_escaped(tmp_path):
+    """compare.html used to name only the two TOML files: mailed on its own, it did not say
+    which drive it compared on."""
+    from estimator.params import Params
+    from inspector.export.compare import Comparison, write_comparison
+
+    comparison = Comparison(
+        metrics=(("truth horizontal RMSE [m]", None, None), ("route deviation RMSE [m]", 1.0, 1.5)),
+        attempts=(3, 3),
+        accepted=(3, 2),
+        changed=(),
+    )
+    log = tmp_path / "tunnel <b>bold é.mcap"
+    route = tmp_path / "tunnel <b>bold é.route.geojson"
+    write_comparison(
+        tmp_path, comparison, Params(), Params(), ("a.toml", "b.toml"),
+        log=log, route=route, method="paper",
+    )  # fmt: skip
+    page = (tmp_path / "compare.html").read_text(encoding="utf-8")
+    assert "<b>bold" not in page
+    assert f"log <code>{tmp_path}/tunnel &lt;b&gt;bold é.mcap</code>" in page
+    assert "tunnel &lt;b&gt;bold é.route.geojson" in page and "method paper" in page
+    assert "<title>routefuse: tunnel &lt;b&gt;bold é.mcap: a.toml vs b.toml</title>" in page
+    assert "no ground truth in this log" in page

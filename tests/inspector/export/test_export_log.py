@@ -418,3 +418,49 @@ def test_the_replay_panel_escapes_what_it_shows():
     assert "&lt;img src=x onerror=" in panel
     assert len(_panel_data(panel)["attempts"]) == 4
     assert "no ground truth" in panel
+
+
+def test_an_export_stopped_midway_leaves_the_earlier_one_whole(bag, tmp_path, monkeypatch):
+    """Stopped while writing its replay, an export into a folder holding an earlier one used to
+    leave its new tables and figures beside the earlier replay and report: a folder that looks
+    complete and is neither export."""
+    import inspector.export.replay as replay
+
+    log, route = bag
+    out = tmp_path / "out"
+    out.mkdir()
+    earlier = {name: f"earlier {name}" for name in ("metrics.json", "replay.html", "report.html")}
+    for name, text in earlier.items():
+        (out / name).write_text(text)
+
+    def ctrl_c(*args, **kwargs):
+        raise KeyboardInterrupt
+
+    monkeypatch.setattr(replay, "write_replay", ctrl_c)
+    with pytest.raises(KeyboardInterrupt):
+        export_log(log, route, out)
+    assert {p.name: p.read_text() for p in out.iterdir()} == earlier
+    monkeypatch.undo()
+    result = export_log(log, route, out)
+    assert {p.name for p in out.iterdir()} == EXPECTED
+    assert all(f.parent == out and f.is_file() for f in result.files)
+    assert (out / "metrics.json").read_text().startswith("{")
+
+
+def test_a_failed_export_leaves_no_empty_folder(bag, tmp_path):
+    """A batch or sweep --export left an empty folder for each log whose route could not be
+    read, beside the real exports."""
+    from estimator.errors import RoutefuseError
+
+    log, _ = bag
+    bad_route = tmp_path / "bad.route.geojson"
+    bad_route.write_text("not json")
+    out = tmp_path / "exports" / "bad"
+    with pytest.raises(RoutefuseError, match="not valid JSON"):
+        export_log(log, bad_route, out)
+    assert not out.exists() and (tmp_path / "exports").is_dir()
+    kept = tmp_path / "kept"
+    kept.mkdir()
+    with pytest.raises(RoutefuseError):
+        export_log(log, bad_route, kept)
+    assert kept.is_dir()  # a folder the user made stays

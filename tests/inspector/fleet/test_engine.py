@@ -186,3 +186,76 @@ def test_exports_are_linked_from_the_report_and_resumed(dask_cluster, short_driv
     # other replay options: the exports are written again
     other = run_sweep(plan, out, cache_dir=tmp_path / "cache", export=ReplayOptions(), **kwargs)
     assert other.ran == 2
+
+
+def test_local_workers_leave_ctrl_c_to_the_client():
+    """Ctrl-C reaches the whole process group: the local workers used to take it too, each
+    printing a KeyboardInterrupt traceback while the client was already closing the cluster.
+    They start with SIGINT ignored; the client's own handler is back once they run."""
+    from inspector.fleet.engine import open_client
+
+    before = signal.getsignal(signal.SIGINT)
+    with open_client(workers=1, scheduler=None) as client:
+        assert signal.getsignal(signal.SIGINT) is before
+        ignored = client.run(lambda: signal.getsignal(signal.SIGINT) == signal.SIG_IGN)
+    assert list(ignored.values()) == [True]
+
+
+def test_a_run_stopped_midway_leaves_no_table_or_report_that_looks_complete(tmp_path):
+    """A second run into the same folder stopped by Ctrl-C used to leave the first run's
+    results.csv and report.html beside the new plan.json, looking like this run's."""
+    logs = tmp_path / "logs"
+    logs.mkdir()
+    for stem in ("a", "b"):
+        (logs / f"{stem}.mcap").write_bytes(b"")  # no route: rows made on the client
+    out = tmp_path / "out"
+    plan = SweepPlan(collect_logs([str(logs)]), build_sets([]))
+    run_sweep(plan, out, progress=QuietProgress())
+    assert (out / "results.csv").is_file() and (out / "report.html").is_file()
+
+    def ctrl_c(row):
+        raise KeyboardInterrupt
+
+    with pytest.raises(KeyboardInterrupt):
+        run_sweep(plan, out, progress=QuietProgress(), on_row=ctrl_c)
+    assert sorted(p.name for p in out.iterdir()) == ["plan.json", "sets", "tasks"]
+
+
+def test_a_table_write_that_fails_midway_leaves_no_table(tmp_path):
+    from inspector.fleet.table import write_table
+
+    def rows():
+        yield {"log": "a"}
+        raise KeyboardInterrupt
+
+    with pytest.raises(KeyboardInterrupt):
+        write_table(rows(), [("log", str)], tmp_path)
+    assert list(tmp_path.iterdir()) == []
+
+
+def test_the_table_is_written_in_chunks_without_holding_every_row(tmp_path, monkeypatch):
+    """write_table took every row into one list before its first chunk (``[*rows, None]``): a
+    sweep's client held the whole table at the end, however large."""
+    import inspector.fleet.table as table
+
+    monkeypatch.setattr(table, "CHUNK_ROWS", 2)
+    yielded = 0
+    first_write_after: list[int] = []
+    real_typed = table._typed
+
+    def typed(value, tp):
+        if not first_write_after:
+            first_write_after.append(yielded)
+        return real_typed(value, tp)
+
+    monkeypatch.setattr(table, "_typed", typed)
+
+    def rows():
+        nonlocal yielded
+        for i in range(7):
+            yielded += 1
+            yield {"log": f"log{i}"}
+
+    table.write_table(rows(), [("log", str)], tmp_path)
+    assert first_write_after == [2]
+    assert (tmp_path / "results.csv").read_text().splitlines()[1:] == [f"log{i}" for i in range(7)]

@@ -21,6 +21,7 @@ def _touch(folder: Path, *names: str) -> None:
 
 def test_logs_from_a_folder_a_glob_and_a_manifest(tmp_path):
     _touch(tmp_path, "a.mcap", "a.route.geojson", "b.mcap", "b.route.gpx", "c.bag", "notes.txt")
+    (tmp_path / "c.bag").write_bytes(b"#ROSBAG V2.0\n")  # a log without a route, not a bad log
     sub = tmp_path / "sub"
     sub.mkdir()
     _touch(sub, "a.mcap", "a.route.geojson", "other.geojson")
@@ -50,10 +51,8 @@ def test_logs_from_a_folder_a_glob_and_a_manifest(tmp_path):
 @pytest.mark.parametrize(
     ("text", "message"),
     [
-        ("log,route\nmissing.mcap,\n", "line 2: missing.mcap: no such file"),
         ("log,weather\na.mcap,sunny\n", "unknown column 'weather'"),
         ("log,outages\na.mcap,50:20\n", "line 2: outages"),
-        ("log,route\na.mcap,nowhere.geojson\n", "line 2: nowhere.geojson: no such route"),
         ("log\n", "lists no log"),
     ],
 )
@@ -168,3 +167,64 @@ def test_regressions_are_ranked_against_truth_where_the_logs_have_it():
     with_truth = [{"rmse_pos_dev_m": 0.3, "rmse_h_err_m": 2.0}, {"rmse_pos_dev_m": 0.4}]
     assert ranking_metric(with_truth) == "rmse_h_err_m"
     assert ranking_metric([{"rmse_pos_dev_m": 0.3, "rmse_h_err_m": None}]) == "rmse_pos_dev_m"
+
+
+def test_a_folder_that_cannot_be_read_is_a_member_named_for_its_problem(tmp_path, unreadable):
+    """An unreadable folder beside the logs neither stops the sweep (it used to end it with
+    "internal error: PermissionError") nor vanishes: its task fails saying why."""
+    _touch(tmp_path, "a.mcap", "a.route.geojson")
+    locked = tmp_path / "locked"
+    locked.mkdir()
+    _touch(locked, "b.mcap", "b.route.geojson")
+    unreadable(locked)
+    entries = {e.label: e for e in collect_logs([str(tmp_path)])}
+    assert sorted(entries) == ["a", "locked"]
+    assert entries["locked"].route_error == f"{locked}: cannot open it (Permission denied)"
+    assert entries["a"].route_error is None
+    # named alone: one member, the same one-line problem
+    (alone,) = collect_logs([str(locked)])
+    assert alone.route_error == f"{locked}: cannot open it (Permission denied)"
+    # a glob inside it matches nothing, said as such
+    with pytest.raises(RoutefuseError, match="no logs found"):
+        collect_logs([str(locked / "*.mcap")])
+
+
+def test_a_log_that_cannot_be_opened_is_named_for_that_not_for_its_missing_route(tmp_path):
+    (tmp_path / "empty.mcap").write_bytes(b"")
+    (entry,) = collect_logs([str(tmp_path / "empty.mcap")])
+    assert entry.route_error == f"{tmp_path / 'empty.mcap'}: file is empty"
+
+
+def test_labels_keep_the_letters_of_any_script(tmp_path):
+    """Labels dropped every letter outside ASCII: "東京トンネル.mcap" was labelled "set" in the
+    table and the report, and "tunnel <b>bold é ü.mcap" "tunnel_b_bold"."""
+    _touch(tmp_path, "東京トンネル.mcap", "tunnel <b>bold é ü.mcap", "..mcap")
+    labels = sorted(e.label for e in collect_logs([str(tmp_path)]))
+    assert labels == ["log", "tunnel_b_bold_é_ü", "東京トンネル"]
+
+
+def test_a_manifest_row_whose_log_or_route_is_missing_is_a_failed_member(tmp_path):
+    """One deleted file in a nightly manifest used to stop the whole sweep before it began."""
+    (tmp_path / "a.mcap").write_bytes(b"\x89MCAP0\r\n")
+    (tmp_path / "a.route.geojson").write_text("{}")
+    manifest = tmp_path / "m.csv"
+    manifest.write_text("log,route\na.mcap,nowhere.geojson\nmissing.mcap,\na.mcap,\n")
+    entries = collect_logs([str(manifest)])
+    assert [e.label for e in entries] == ["a", "missing"]  # a.mcap once (same outages)
+    assert entries[0].route_error == (
+        f"{tmp_path / 'nowhere.geojson'}: no such route file (manifest m.csv, line 2)"
+    )
+    assert entries[1].route_error == f"{tmp_path / 'missing.mcap'}: no such file or folder"
+
+
+def test_a_code_change_makes_new_tasks(tmp_path, monkeypatch):
+    """Task ids ignored the code: the same command after a commit resumed every task, and a
+    regression run into the same folder compared the earlier code's rows with themselves."""
+    import inspector.fleet.plan as plan
+
+    (entry,) = collect_logs([str(_log(tmp_path))])
+    (s,) = build_sets([("method", "proposed")])
+    before = task_id(entry, s)
+    assert len(plan.estimator_source()) == 16 and task_id(entry, s) == before
+    monkeypatch.setattr(plan, "estimator_source", lambda: "another commit")
+    assert task_id(entry, s) != before

@@ -1,0 +1,73 @@
+"""The sweep's report page, from rows (no cluster): what it compares logs by."""
+
+from __future__ import annotations
+
+from pathlib import Path
+
+from inspector.fleet import SweepPlan, build_sets
+from inspector.fleet.engine import SweepLayout
+from inspector.fleet.plan import LogEntry
+from inspector.fleet.report import report_html
+
+
+def _rows(plan: SweepPlan, figures: dict[str, dict[str, tuple[float | None, float]]]):
+    """figures[label][set] = (truth RMSE or None, route deviation RMSE)"""
+    rows = []
+    for entry in plan.logs:
+        for s in plan.sets:
+            truth, route = figures[entry.label][s.name]
+            rows.append(
+                {
+                    "log": str(entry.log),
+                    "label": entry.label,
+                    "route": str(entry.route),
+                    "outages": "",
+                    "set": s.name,
+                    "method": s.method,
+                    "status": "ok",
+                    "error": "",
+                    "export_dir": "",
+                    "total_s": 1.0,
+                    "worker_peak_rss_mb": 300.0,
+                    "rmse_h_err_m": truth,
+                    "rmse_pos_dev_m": route,
+                    "max_pos_dev_m": route,
+                    "rmse_heading_dev_deg": 0.1,
+                }
+            )
+    return rows
+
+
+def _plan(tmp_path: Path, *labels: str) -> SweepPlan:
+    logs = tuple(
+        LogEntry(tmp_path / f"{x}.mcap", tmp_path / f"{x}.route.geojson", x) for x in labels
+    )
+    return SweepPlan(logs, build_sets([("method", "proposed"), ("method", "paper")]))
+
+
+def test_a_log_without_truth_is_compared_by_route_deviation_said_to_be_that(tmp_path):
+    """In a sweep ranked by the error against truth, a log without ground truth used to be a
+    row of dashes: its change was shown nowhere."""
+    plan = _plan(tmp_path, "sim", "real")
+    rows = _rows(
+        plan,
+        {
+            "sim": {"proposed": (1.0, 0.5), "paper": (3.0, 0.25)},
+            "real": {"proposed": (None, 1.5), "paper": (None, 4.0)},
+        },
+    )
+    page = report_html(plan, rows, layout=SweepLayout(tmp_path), base=tmp_path)
+    truth_table, rest = page.split("Logs without ground truth (1)", 1)
+    per_log = truth_table.split("Per log: change of horizontal error RMSE vs truth [m]", 1)[1]
+    assert "<td>real</td>" not in per_log and "<td>sim</td>" in per_log
+    assert "position deviation RMSE [m] from the route" in rest
+    assert "<td>real</td><td class='num'>1.500</td><td class='num worse'>+2.500</td>" in rest
+    assert "rewards following a wrong map" in rest
+
+
+def test_without_truth_anywhere_the_report_warns_the_route_deviation_is_all_there_is(tmp_path):
+    plan = _plan(tmp_path, "real")
+    rows = _rows(plan, {"real": {"proposed": (None, 1.5), "paper": (None, 1.0)}})
+    page = report_html(plan, rows, layout=SweepLayout(tmp_path), base=tmp_path)
+    assert "No log has ground truth" in page
+    assert "Per log: change of position deviation RMSE [m]" in page
