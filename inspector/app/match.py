@@ -63,9 +63,17 @@ def _vec(v: Any, digits: int = 2) -> str:
 
 
 def match_markdown(
-    m: MatchRecord | None, *, t_rel: float | None = None, age_s: float = 0.0, total: int = 0
+    m: MatchRecord | None,
+    *,
+    t_rel: float | None = None,
+    age_s: float = 0.0,
+    total: int | None = None,
 ) -> str:
-    """The match panel: every gate with value, threshold and verdict, then the fit."""
+    """The match panel: every gate with value, threshold and verdict, then the fit.
+
+    ``#index`` is the attempt's number in its run (from 0, as on the map, in ``routefuse run``
+    and in the export); with ``total`` (the run's attempt count) the head also says which of
+    them it is counted from 1, so that the last of 352 does not read "#351 of 352"."""
     if m is None:
         return "*No match attempt before this time.*"
     failed = [g for g in m.gates if not g.passed]
@@ -76,7 +84,8 @@ def match_markdown(
         head += " (re-anchored)"
     when = f" at t = {t_rel:.2f} s" if t_rel is not None else ""
     age = f" ({age_s:.2f} s ago)" if age_s > 0.005 else ""
-    lines = [f"**Attempt #{m.index} of {total}{when}{age}: {head}**", ""]
+    count = f" ({m.index + 1} of {total})" if total else ""
+    lines = [f"**Attempt #{m.index}{count}{when}{age}: {head}**", ""]
     undone = next((g for g in failed if g.gate is Gate.DR_SEPARATION), None)
     if undone is not None:
         here = "dr_separation_m" in m.extra  # the undoing attempt; a later one's note says when

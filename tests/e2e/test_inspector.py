@@ -194,7 +194,7 @@ def test_screenshot_for_the_readme(page, inspector, tmp_path):
     pg.get_by_role("checkbox").first.check()  # follow vehicle
     view.seek(float(tl.match_t[i]) - 0.5 * float(tl.match_t[i] - tl.match_t[i - 1]))
     _click(pg, "attempt ›")
-    _wait(lambda: f"Attempt #{i} of" in pg.inner_text("body"), 20, "the attempt")
+    _wait(lambda: f"Attempt #{i} (" in pg.inner_text("body"), 20, "the attempt")
     text = pg.inner_text("body")
     assert "ACCEPTED" in text and "GNSS missing" in text
     overlay = view.layers.layers["match"]._handles
