@@ -46,7 +46,7 @@ def compare_markdown(a: Session, b: Session) -> str:
     rows = ["| quantity | A | B | B - A |", "|---|---:|---:|---:|"]
     for (label, _, va), (_, _, vb) in zip(a.metrics, b.metrics, strict=False):
         try:
-            delta = signed(float(vb) - float(va))
+            delta = signed(float(vb) - float(va), _decimals(va, vb))
         except ValueError:
             delta = ""
         rows.append(f"| {markdown_text(label)} | {va} | {vb} | {delta} |")
@@ -59,6 +59,12 @@ def compare_markdown(a: Session, b: Session) -> str:
             *rows,
         ]
     )
+
+
+def _decimals(*shown: str) -> int:
+    """The most decimals among figures as shown ('27.2' 1, '43' 0), for their difference: a
+    count's is '+2', not '+2.000', and a figure shown to 0.1 is not differenced to 0.001."""
+    return max(len(v.partition(".")[2]) for v in shown)
 
 
 def same_drive(a: Session, b: Session) -> bool:
