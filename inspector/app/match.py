@@ -51,8 +51,30 @@ def _fmt(v: Any, digits: int = 3) -> str:
     return f"{f:.{digits}f}" if abs(f) < 1e5 else f"{f:.3g}"
 
 
-def _gate_value(g: GateDecision) -> str:
-    return "no rival" if g.no_rival else _fmt(g.value)
+def _angle(cos: float) -> str:
+    """The angle whose cosine the heading gate compares, in degrees."""
+    return f"{np.degrees(np.arccos(np.clip(cos, -1.0, 1.0))):.1f}°"
+
+
+HEADING_NOTE = (
+    "angle between the DR and route end directions, deg (gates.max_heading_diff_deg; the "
+    "matcher compares its cosine, the fit's heading cos)"
+)
+"""the heading row's note: the row shows the angle, not the cosine the gate's own note names"""
+
+
+def _gate_row(g: GateDecision) -> tuple[str, str, str]:
+    """A gate's value, comparison and threshold as a person reads them: a count without
+    decimals; the heading gate as the angle between the directions, the unit its parameter
+    (gates.max_heading_diff_deg) is set in, not the cosines the matcher compares ('0.922 >=
+    0.985' is '22.8° <= 10.0°'); the others as the matcher compares them."""
+    value = "no rival" if g.no_rival else _fmt(g.value)
+    if g.gate is Gate.MIN_PAIRS:
+        return _fmt(g.value, 0), g.comparison, _fmt(g.threshold, 0)
+    finite = np.isfinite([g.value, g.threshold]).all()
+    if g.gate is Gate.HEADING and g.comparison == ">=" and finite:
+        return _angle(g.value), "<=", _angle(g.threshold)
+    return value, g.comparison, _fmt(g.threshold)
 
 
 def _vec(v: Any, digits: int = 2) -> str:
@@ -114,11 +136,11 @@ def match_markdown(
     notes = []
     for g in m.gates:
         verdict = "✓ passed" if g.passed else "✗ **FAILED**"
-        lines.append(
-            f"| {g.name} | {_gate_value(g)} | {g.comparison} {_fmt(g.threshold)} | {verdict} |"
-        )
-        if g.note:
-            notes.append(f"*{g.name}*: {g.note}")
+        value, comparison, threshold = _gate_row(g)
+        lines.append(f"| {g.name} | {value} | {comparison} {threshold} | {verdict} |")
+        note = HEADING_NOTE if g.gate is Gate.HEADING and value.endswith("°") else g.note
+        if note:
+            notes.append(f"*{g.name}*: {note}")
     corr = np.asarray(m.correction, np.float64).reshape(-1)
     corr_norm = float(np.hypot(*corr)) if corr.size == 2 and np.all(np.isfinite(corr)) else np.nan
     cov = np.asarray(m.obs_cov, np.float64)

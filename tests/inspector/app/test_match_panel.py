@@ -116,3 +116,15 @@ def test_the_head_counts_the_attempt_from_one_and_never_of_zero():
     assert "of 0" not in text
     assert "Attempt #2 at t = 50.00 s: REJECTED by residual**" in text
     assert "Attempt #2 at t = 50.00 s: ACCEPTED**" in text
+
+
+def test_gate_rows_read_in_the_units_the_parameters_are_set_in():
+    """gates.max_heading_diff_deg is set in degrees: the heading row gave only cosines
+    ('0.922 >= 0.985'), so it shows the angles (the cosine stays in the fit table); a count of
+    pairs has no decimals ('51.000 >= 20.000' read as a measured quantity)."""
+    text = match_markdown(make_run(rejected=(2,)).matches[2], t_rel=50.0, total=5)
+    assert "| min_pairs | 21 | >= 20 | ✓ passed |" in text
+    assert "| heading | 2.6° | <= 10.0° | ✓ passed |" in text
+    assert "| residual | 7.500 | <= 3.000 | ✗ **FAILED** |" in text
+    assert "| heading cos | 0.9990 |" in text
+    assert "*heading*: angle between the DR and route end directions, deg" in text
