@@ -4,6 +4,7 @@ to it, with the Match tab filled. Clicks and reads the page as a person does, in
 
 from __future__ import annotations
 
+import math
 import re
 from pathlib import Path
 
@@ -58,5 +59,34 @@ def test_the_page_opens_at_the_first_refusal_with_a_legend(browser, session, tmp
         for cls in LAYER_TYPES:
             page.get_by_text(cls.label, exact=True).first.wait_for()
         page.screenshot(path=str(tmp_path / "layers_tab.png"))
+    finally:
+        page.close()
+
+
+def test_top_down_view_shows_the_whole_drive_after_the_opening_zoom(browser, session, tmp_path):
+    """The page opens zoomed to its first refused attempt; **top-down view** then shows the
+    whole drive. It went back to the opening zoom instead (the button did nothing visible)."""
+    server, controller, app = session
+    extent = controller.session.scene.extent_m
+    page = browser.new_page(viewport={"width": 1400, "height": 900})
+    page.set_default_timeout(90_000)
+    try:
+        page.goto(f"http://127.0.0.1:{server.get_port()}")
+        _wait(lambda: "REJECTED" in page.inner_text("body"), 60, "the refused attempt")
+        cam = app.views()[-1].client.camera
+        _wait(lambda: cam.update_timestamp > 0, 20, "the browser's camera")
+        _wait(lambda: float(cam.position[2]) < 0.5 * extent, 20, "the opening zoom")
+        page.get_by_role("button", name="top-down view", exact=True).click()
+        _wait(
+            lambda: float(cam.position[2]) >= 0.6 * extent,
+            20,
+            lambda: (
+                f"the whole drive (camera {float(cam.position[2]):.0f} m up, drive {extent:.0f} m)"
+            ),
+        )
+        # and all of it: the monaco drive runs north-south, across the window's height
+        up = float(cam.position[2]) * math.tan(float(cam.fov) / 2)
+        assert up >= 0.5 * extent, (up, extent)
+        page.screenshot(path=str(tmp_path / "top_down.png"))
     finally:
         page.close()
