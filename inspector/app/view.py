@@ -249,9 +249,12 @@ class ClientView:
     # -- drawing --------------------------------------------------------------------------
 
     def set_session(self, session: Session) -> None:
-        """A new session: redraw everything, keeping this tab's time."""
+        """A new session: redraw everything, keeping this tab's time and camera; a session of
+        another log (opened from the Files tab) opens as the first does, at its first refused
+        attempt with the camera on it (the previous drive's time and view mean nothing in it:
+        the map was left blank, looking where the previous drive was)."""
         with self._lock:
-            first = self.session is None
+            first = self.session is None or self.session.log_path != session.log_path
             self.session = session
             with self.client.atomic():
                 self.layers.set_data(session.scene)
