@@ -34,6 +34,10 @@ NOT_PINNED = (
 )
 
 
+GAP = "&ensp;"
+"""the space kept between two right-aligned figures of the comparison table"""
+
+
 def compare_markdown(a: Session, b: Session) -> str:
     """A, B and B - A of the proposed run's figures, and the count of changed verdicts."""
     if a.version == b.version:
@@ -49,7 +53,9 @@ def compare_markdown(a: Session, b: Session) -> str:
             delta = signed(float(vb) - float(va), _decimals(va, vb))
         except ValueError:
             delta = ""
-        rows.append(f"| {markdown_text(label)} | {va} | {vb} | {delta} |")
+        # an en space before B and B - A: the table has no cell padding, and right-aligned
+        # columns ran together ('5.0550.000', '21+2')
+        rows.append(f"| {markdown_text(label)} | {va} | {GAP}{vb} | {GAP}{delta} |")
     changed = changed_verdicts(a.proposed, b.proposed)
     return "\n".join(
         [

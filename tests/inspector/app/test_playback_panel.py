@@ -108,7 +108,7 @@ def test_a_run_pinned_on_another_drive_is_not_compared():
     assert same_drive(a, b) and not same_drive(a, other)
     assert "nothing to compare" in compare_markdown(a, other)
     text = compare_markdown(a, b)
-    assert "| position deviation RMSE \\[m\\] | 2.0 | 2.0 | 0.0 |" in text  # no sign on zero
+    assert "| position deviation RMSE \\[m\\] | 2.0 | &ensp;2.0 | &ensp;0.0 |" in text  # no sign
     assert "0 attempts" in text
 
 
@@ -140,7 +140,8 @@ def test_b_minus_a_is_shown_to_the_precision_of_a_and_b():
         ("match attempts (accepted / rejected)", "", "352 (282 / 70)"),
     )
     text = compare_markdown(session(1, rows_a), session(2, rows_b))
-    assert "| max position deviation \\[m\\] | 27.2 | 26.9 | -0.3 |" in text
-    assert "| mean position deviation \\[m\\] | 5.055 | 5.101 | +0.046 |" in text
-    assert "| rejected first by residual | 19 | 21 | +2 |" in text
-    assert "| 352 (283 / 69) | 352 (282 / 70) |  |" in text
+    # B and B - A each after an en space: the columns ran together ('5.0550.000', '21+2')
+    assert "| max position deviation \\[m\\] | 27.2 | &ensp;26.9 | &ensp;-0.3 |" in text
+    assert "| mean position deviation \\[m\\] | 5.055 | &ensp;5.101 | &ensp;+0.046 |" in text
+    assert "| rejected first by residual | 19 | &ensp;21 | &ensp;+2 |" in text
+    assert "| 352 (283 / 69) | &ensp;352 (282 / 70) | &ensp; |" in text
