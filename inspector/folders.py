@@ -190,6 +190,12 @@ class _Walk:
                         below.append((p, depth + 1))
                 elif is_log_path(p) or is_route_path(p):
                     yield from self._accept(p, root)
+                elif _is_folder_link(entry) and not entry.name.startswith("."):
+                    # said, not skipped silently: the logs under it are missing from the list
+                    self.warnings.append(
+                        f"{p}: a link to a folder; links to folders are not followed (pass the "
+                        "folder itself with --data-dir); not listed"
+                    )
             stack.extend(reversed(below))
 
     def _accept(self, path: Path, root: Path) -> Iterable[Path]:
@@ -210,6 +216,14 @@ def _is_real_dir(entry: os.DirEntry[str]) -> bool:
     """A folder to walk into: not a symlink (those are never followed) and readable as one."""
     try:
         return entry.is_dir(follow_symlinks=False)
+    except OSError:
+        return False
+
+
+def _is_folder_link(entry: os.DirEntry[str]) -> bool:
+    """A symlink to a folder (which the walk does not follow)."""
+    try:
+        return entry.is_symlink() and entry.is_dir(follow_symlinks=True)
     except OSError:
         return False
 

@@ -208,7 +208,8 @@ class OffRoute:
                 f"({self.source} > {self.threshold_m:g} m from the route)"
             )
         if self.n_refused:
-            parts.append(f"{self.n_refused} attempts refused as ambiguous / off-route")
+            n = self.n_refused
+            parts.append(f"{n} attempt{'s' if n > 1 else ''} refused as ambiguous / off-route")
         return " · ".join(parts)
 
     def frame_text(self, t_rel: float) -> str:

@@ -34,6 +34,10 @@ NOT_PINNED = (
 )
 
 
+GAP = "&ensp;"
+"""the space kept between two right-aligned figures of the comparison table"""
+
+
 def compare_markdown(a: Session, b: Session) -> str:
     """A, B and B - A of the proposed run's figures, and the count of changed verdicts."""
     if a.version == b.version:
@@ -46,10 +50,12 @@ def compare_markdown(a: Session, b: Session) -> str:
     rows = ["| quantity | A | B | B - A |", "|---|---:|---:|---:|"]
     for (label, _, va), (_, _, vb) in zip(a.metrics, b.metrics, strict=False):
         try:
-            delta = signed(float(vb) - float(va))
+            delta = signed(float(vb) - float(va), _decimals(va, vb))
         except ValueError:
             delta = ""
-        rows.append(f"| {markdown_text(label)} | {va} | {vb} | {delta} |")
+        # an en space before B and B - A: the table has no cell padding, and right-aligned
+        # columns ran together ('5.0550.000', '21+2')
+        rows.append(f"| {markdown_text(label)} | {va} | {GAP}{vb} | {GAP}{delta} |")
     changed = changed_verdicts(a.proposed, b.proposed)
     return "\n".join(
         [
@@ -59,6 +65,12 @@ def compare_markdown(a: Session, b: Session) -> str:
             *rows,
         ]
     )
+
+
+def _decimals(*shown: str) -> int:
+    """The most decimals among figures as shown ('27.2' 1, '43' 0), for their difference: a
+    count's is '+2', not '+2.000', and a figure shown to 0.1 is not differenced to 0.001."""
+    return max(len(v.partition(".")[2]) for v in shown)
 
 
 def same_drive(a: Session, b: Session) -> bool:

@@ -51,8 +51,30 @@ def _fmt(v: Any, digits: int = 3) -> str:
     return f"{f:.{digits}f}" if abs(f) < 1e5 else f"{f:.3g}"
 
 
-def _gate_value(g: GateDecision) -> str:
-    return "no rival" if g.no_rival else _fmt(g.value)
+def _angle(cos: float) -> str:
+    """The angle whose cosine the heading gate compares, in degrees."""
+    return f"{np.degrees(np.arccos(np.clip(cos, -1.0, 1.0))):.1f}°"
+
+
+HEADING_NOTE = (
+    "angle between the DR and route end directions, deg (gates.max_heading_diff_deg; the "
+    "matcher compares its cosine, the fit's heading cos)"
+)
+"""the heading row's note: the row shows the angle, not the cosine the gate's own note names"""
+
+
+def _gate_row(g: GateDecision) -> tuple[str, str, str]:
+    """A gate's value, comparison and threshold as a person reads them: a count without
+    decimals; the heading gate as the angle between the directions, the unit its parameter
+    (gates.max_heading_diff_deg) is set in, not the cosines the matcher compares ('0.922 >=
+    0.985' is '22.8° <= 10.0°'); the others as the matcher compares them."""
+    value = "no rival" if g.no_rival else _fmt(g.value)
+    if g.gate is Gate.MIN_PAIRS:
+        return _fmt(g.value, 0), g.comparison, _fmt(g.threshold, 0)
+    finite = np.isfinite([g.value, g.threshold]).all()
+    if g.gate is Gate.HEADING and g.comparison == ">=" and finite:
+        return _angle(g.value), "<=", _angle(g.threshold)
+    return value, g.comparison, _fmt(g.threshold)
 
 
 def _vec(v: Any, digits: int = 2) -> str:
@@ -63,9 +85,17 @@ def _vec(v: Any, digits: int = 2) -> str:
 
 
 def match_markdown(
-    m: MatchRecord | None, *, t_rel: float | None = None, age_s: float = 0.0, total: int = 0
+    m: MatchRecord | None,
+    *,
+    t_rel: float | None = None,
+    age_s: float = 0.0,
+    total: int | None = None,
 ) -> str:
-    """The match panel: every gate with value, threshold and verdict, then the fit."""
+    """The match panel: every gate with value, threshold and verdict, then the fit.
+
+    ``#index`` is the attempt's number in its run (from 0, as on the map, in ``routefuse run``
+    and in the export); with ``total`` (the run's attempt count) the head also says which of
+    them it is counted from 1, so that the last of 352 does not read "#351 of 352"."""
     if m is None:
         return "*No match attempt before this time.*"
     failed = [g for g in m.gates if not g.passed]
@@ -76,7 +106,8 @@ def match_markdown(
         head += " (re-anchored)"
     when = f" at t = {t_rel:.2f} s" if t_rel is not None else ""
     age = f" ({age_s:.2f} s ago)" if age_s > 0.005 else ""
-    lines = [f"**Attempt #{m.index} of {total}{when}{age}: {head}**", ""]
+    count = f" ({m.index + 1} of {total})" if total else ""
+    lines = [f"**Attempt #{m.index}{count}{when}{age}: {head}**", ""]
     undone = next((g for g in failed if g.gate is Gate.DR_SEPARATION), None)
     if undone is not None:
         here = "dr_separation_m" in m.extra  # the undoing attempt; a later one's note says when
@@ -105,11 +136,11 @@ def match_markdown(
     notes = []
     for g in m.gates:
         verdict = "✓ passed" if g.passed else "✗ **FAILED**"
-        lines.append(
-            f"| {g.name} | {_gate_value(g)} | {g.comparison} {_fmt(g.threshold)} | {verdict} |"
-        )
-        if g.note:
-            notes.append(f"*{g.name}*: {g.note}")
+        value, comparison, threshold = _gate_row(g)
+        lines.append(f"| {g.name} | {value} | {comparison} {threshold} | {verdict} |")
+        note = HEADING_NOTE if g.gate is Gate.HEADING and value.endswith("°") else g.note
+        if note:
+            notes.append(f"*{g.name}*: {note}")
     corr = np.asarray(m.correction, np.float64).reshape(-1)
     corr_norm = float(np.hypot(*corr)) if corr.size == 2 and np.all(np.isfinite(corr)) else np.nan
     cov = np.asarray(m.obs_cov, np.float64)

@@ -186,7 +186,9 @@ class ClientView:
     # -- camera ---------------------------------------------------------------------------
 
     def place_camera(self) -> None:
-        """Top-down over the whole drive (or over the vehicle when following)."""
+        """Top-down over the whole drive (or over the vehicle when following); the first
+        placement of a tab looks at the attempt it opened at (:meth:`_open_at_the_story`), once:
+        **top-down view** afterwards shows the whole drive, also of a log opened later."""
         s = self.session
         if s is None:
             return
@@ -204,11 +206,15 @@ class ClientView:
             self._camera_pending = True  # the browser has not reported its camera yet
             return
         self._camera_pending = False
+        focused, self._focus = self._focus is not None, None
         # The control panel covers the right of the view: fit the drive into the rest and
         # shift the view east so it is centred there (top-down, north up: screen x = east).
         aspect, free, half_h = self._view_geometry()
-        if not self.follow and self._focus is None:
-            height = max(height, data.extent_m * 0.55 / (half_h * aspect * free))
+        if not self.follow and not focused:
+            # the drive's extent across the free width, and up the view's height (a drive
+            # running north-south ran off the top and bottom of a wide window)
+            across = data.extent_m * 0.55 / (half_h * aspect * free)
+            height = max(height, across, data.extent_m * 0.55 / half_h)
         center = np.asarray(center, float) + self._panel_shift(height)[:2]
         cam.far = max(10 * height, 1000.0)
         cam.near = max(height / 100, 0.05)  # depth precision for layers 5 cm apart
@@ -243,9 +249,12 @@ class ClientView:
     # -- drawing --------------------------------------------------------------------------
 
     def set_session(self, session: Session) -> None:
-        """A new session: redraw everything, keeping this tab's time."""
+        """A new session: redraw everything, keeping this tab's time and camera; a session of
+        another log (opened from the Files tab) opens as the first does, at its first refused
+        attempt with the camera on it (the previous drive's time and view mean nothing in it:
+        the map was left blank, looking where the previous drive was)."""
         with self._lock:
-            first = self.session is None
+            first = self.session is None or self.session.log_path != session.log_path
             self.session = session
             with self.client.atomic():
                 self.layers.set_data(session.scene)

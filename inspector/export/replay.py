@@ -421,6 +421,12 @@ PLAYBACK_SPEEDS = (1.0, 2.0, 5.0, 10.0, 20.0, 50.0, 100.0, 200.0)
 """log seconds per second the replay page offers (with the export's own time lapse)"""
 
 
+def speed_options(speed: float) -> list[tuple[str, str]]:
+    """The page's speeds as (value, label): the export's own time lapse (the log's length over
+    the replay's) is labelled to three figures, '4.45x', not '4.44833x'."""
+    return [(f"{s:g}", f"{float(f'{s:.3g}'):g}") for s in sorted({*PLAYBACK_SPEEDS, speed})]
+
+
 def replay_panel(
     scene: SceneData,
     plot: DeviationPlot,
@@ -464,7 +470,7 @@ def replay_panel(
     script = (resources.files("inspector.export") / "templates" / "replay_panel.js").read_text()
     return env.get_template("replay_panel.html").render(
         title=title,
-        speeds=[f"{s:g}" for s in sorted({*PLAYBACK_SPEEDS, speed})],
+        speeds=speed_options(speed),
         speed=f"{speed:g}",
         duration=f"{duration:.1f}",
         strip_png=base64.b64encode(strip.png).decode("ascii"),

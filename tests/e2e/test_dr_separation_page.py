@@ -30,7 +30,7 @@ def _dr_separation(m):
 
 
 def _attempt(page) -> int:
-    m = re.search(r"Attempt #(\d+) of", page.inner_text("body"))
+    m = re.search(r"Attempt #(\d+) \(", page.inner_text("body"))
     return int(m.group(1)) if m else -1
 
 

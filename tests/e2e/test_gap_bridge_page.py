@@ -39,7 +39,7 @@ def test_bridged_gap_on_the_page(browser, tmp_path):
 
         page.get_by_role("tab", name="Match").click()
         view.seek(t_match + 0.01)
-        wait_until(lambda: f"Attempt #{i} of" in page.inner_text("body"), 20, "the attempt")
+        wait_until(lambda: f"Attempt #{i} (" in page.inner_text("body"), 20, "the attempt")
         text = page.inner_text("body")
         assert f"Before this attempt the IMU gap that ended at {end:.1f} s was bridged" in text
         assert "(extensions.gap_route_bridge)" in text, text[:3000]

@@ -194,7 +194,7 @@ def test_screenshot_for_the_readme(page, inspector, tmp_path):
     pg.get_by_role("checkbox").first.check()  # follow vehicle
     view.seek(float(tl.match_t[i]) - 0.5 * float(tl.match_t[i] - tl.match_t[i - 1]))
     _click(pg, "attempt ›")
-    _wait(lambda: f"Attempt #{i} of" in pg.inner_text("body"), 20, "the attempt")
+    _wait(lambda: f"Attempt #{i} (" in pg.inner_text("body"), 20, "the attempt")
     text = pg.inner_text("body")
     assert "ACCEPTED" in text and "GNSS missing" in text
     overlay = view.layers.layers["match"]._handles
@@ -270,7 +270,7 @@ def test_next_rejected_attempt_shows_the_failed_gate(page, inspector):
     _wait(lambda: _frame(pg) > start, 10, "the jump")
     _wait(lambda: "REJECTED" in pg.inner_text("body"), 10, "a rejected attempt")
     text = pg.inner_text("body")
-    assert re.search(r"min_pairs\s+[\d.]+\s+>= 500\.000\s+✗ FAILED", text), text[:2000]
+    assert re.search(r"min_pairs\s+\d+\s+>= 500\s+✗ FAILED", text), text[:2000]
     i = view.session.timeline.match_at(view.playhead.t)
     assert i is not None and not view.session.proposed.matches[i].accepted
     assert view.layers.layers["match"]._handles["label"].text.endswith("rejected: min_pairs")

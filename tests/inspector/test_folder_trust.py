@@ -93,3 +93,21 @@ def test_a_huge_data_folder_is_walked_within_bounds_and_says_so(tmp_path):
     assert any("1000" in w and "not all" in w for w in listing.warnings)
     slow = DataFolders.of(data, max_seconds=0.0)
     assert any("s;" in w or "seconds" in w for w in slow.listing().warnings)
+
+
+def test_a_link_to_a_folder_is_not_followed_and_the_listing_says_so(tmp_path):
+    """Links to folders are never followed (one could lead anywhere); the Files tab said
+    nothing of one, so the logs under it were missing without a word."""
+    elsewhere = tmp_path / "elsewhere"
+    elsewhere.mkdir()
+    (elsewhere / "far.mcap").write_bytes(b"x")
+    data = tmp_path / "data"
+    (data / "sub").mkdir(parents=True)
+    (data / "drive.mcap").write_bytes(b"x")
+    os.symlink(elsewhere, data / "sub" / "mounted")
+    listing = DataFolders.of(data).listing()
+    assert set(listing.logs) == {"data/drive.mcap"}
+    assert [w for w in listing.warnings if "mounted" in w] == [
+        f"{data / 'sub' / 'mounted'}: a link to a folder; links to folders are not followed "
+        "(pass the folder itself with --data-dir); not listed"
+    ]

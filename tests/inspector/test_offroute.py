@@ -124,6 +124,11 @@ def test_on_route_session_has_no_off_route_state():
     scene = SceneData.build(baseline=drifting, proposed=drifting, route=make_route(), log=None)
     off = OffRoute.build(scene, make_route(), Params())
     assert off.spans and off.spans[0][0] > 20.0 and "OFF-ROUTE" in off.summary()
+    # the status line's count of refused attempts agrees in number ('1 attempts' read as a slip)
+    one = replace(off, refused=("lane_continuity",) + (None,) * 3)
+    assert one.summary().endswith(" · 1 attempt refused as ambiguous / off-route")
+    two = replace(off, refused=("lane_continuity", "alternative_left"))
+    assert two.summary().endswith(" · 2 attempts refused as ambiguous / off-route")
 
 
 # --- routes of every shape (issue 19): the vehicle on the route is never off it ------------

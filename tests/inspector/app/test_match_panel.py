@@ -10,7 +10,7 @@ from inspector.app import match_markdown
 def test_match_panel_lists_every_gate_and_marks_the_failed_one():
     run = make_run(rejected=(2,))
     text = match_markdown(run.matches[2], t_rel=50.0, total=5)
-    assert "Attempt #2 of 5 at t = 50.00 s: REJECTED" in text
+    assert "Attempt #2 (3 of 5) at t = 50.00 s: REJECTED" in text
     rows = [line for line in text.splitlines() if line.startswith("| ")]
     gate_rows = {r.split("|")[1].strip(): r for r in rows[1:4]}
     assert set(gate_rows) == {"min_pairs", "heading", "residual"}
@@ -43,7 +43,7 @@ def test_match_panel_says_why_route_updates_were_undone():
     extra = {**m.extra, "dr_separation_m": 3.8}
     undone = dataclasses.replace(m, accepted=False, gates=(*m.gates, failed), extra=extra)
     text = match_markdown(undone, t_rel=50.0, total=5)
-    assert "Attempt #1 of 5 at t = 50.00 s: REJECTED by dr_separation**" in text
+    assert "Attempt #1 (2 of 5) at t = 50.00 s: REJECTED by dr_separation**" in text
     assert UNDONE_HERE in text
     note = "the outage's route updates were undone at 45.0 s: none taken since"
     later = dataclasses.replace(
@@ -70,7 +70,7 @@ def test_match_panel_says_why_a_refused_match_was_applied():
         m, gates=(*m.gates, failed), reanchored=True, rotation_rad=math.radians(-19.9)
     )
     text = match_markdown(turned, t_rel=50.0, total=5)
-    assert "Attempt #1 of 5 at t = 50.00 s: ACCEPTED (re-anchored)**" in text
+    assert "Attempt #1 (2 of 5) at t = 50.00 s: ACCEPTED (re-anchored)**" in text
     assert REANCHORED in text
     after_gap = dataclasses.replace(turned, extra={**m.extra, "gap_end_s": 294.2})
     text = match_markdown(after_gap, t_rel=50.0, total=5)
@@ -99,3 +99,32 @@ def test_match_panel_says_an_imu_gap_was_bridged_before_the_attempt():
         "left it on and turned its heading +59.1 deg to the road's "
         "(extensions.gap_route_bridge).*"
     ) in text
+
+
+def test_the_head_counts_the_attempt_from_one_and_never_of_zero():
+    """The attempt's number is its index (from 0, as on the map); the count beside it is from 1,
+    so the last of five is '#4 (5 of 5)', not '#4 of 5'. The Compare tab's changed attempt,
+    which passes no count, said 'Attempt #166 of 0'."""
+    from inspector.app.compare import changed_markdown
+    from inspector.export.compare import ChangedVerdict
+
+    run = make_run(rejected=(2,))
+    last = match_markdown(run.matches[4], t_rel=60.0, total=5)
+    assert "**Attempt #4 (5 of 5) at t = 60.00 s: ACCEPTED**" in last
+    other = make_run(rejected=())
+    text = changed_markdown(ChangedVerdict(50.0, run.matches[2], other.matches[2]), 1, 0)
+    assert "of 0" not in text
+    assert "Attempt #2 at t = 50.00 s: REJECTED by residual**" in text
+    assert "Attempt #2 at t = 50.00 s: ACCEPTED**" in text
+
+
+def test_gate_rows_read_in_the_units_the_parameters_are_set_in():
+    """gates.max_heading_diff_deg is set in degrees: the heading row gave only cosines
+    ('0.922 >= 0.985'), so it shows the angles (the cosine stays in the fit table); a count of
+    pairs has no decimals ('51.000 >= 20.000' read as a measured quantity)."""
+    text = match_markdown(make_run(rejected=(2,)).matches[2], t_rel=50.0, total=5)
+    assert "| min_pairs | 21 | >= 20 | ✓ passed |" in text
+    assert "| heading | 2.6° | <= 10.0° | ✓ passed |" in text
+    assert "| residual | 7.500 | <= 3.000 | ✗ **FAILED** |" in text
+    assert "| heading cos | 0.9990 |" in text
+    assert "*heading*: angle between the DR and route end directions, deg" in text

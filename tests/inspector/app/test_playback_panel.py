@@ -108,5 +108,40 @@ def test_a_run_pinned_on_another_drive_is_not_compared():
     assert same_drive(a, b) and not same_drive(a, other)
     assert "nothing to compare" in compare_markdown(a, other)
     text = compare_markdown(a, b)
-    assert "| position deviation RMSE \\[m\\] | 2.0 | 2.0 | 0.000 |" in text  # no sign on zero
+    assert "| position deviation RMSE \\[m\\] | 2.0 | &ensp;2.0 | &ensp;0.0 |" in text  # no sign
     assert "0 attempts" in text
+
+
+def test_b_minus_a_is_shown_to_the_precision_of_a_and_b():
+    """A count's difference is '+2', not '+2.000' (which also ran into B's column), and a
+    figure shown to 0.1 m is not differenced to the millimetre."""
+    from inspector.app.compare import compare_markdown
+
+    def session(version, metrics):
+        return SimpleNamespace(
+            version=version,
+            log_path=Path("/data/a.mcap"),
+            route_path=Path("/data/r.geojson"),
+            log_name="a.mcap",
+            metrics=metrics,
+            proposed=SimpleNamespace(matches=(), t0=0.0),
+        )
+
+    rows_a = (
+        ("max position deviation [m]", "", "27.2"),
+        ("mean position deviation [m]", "", "5.055"),
+        ("rejected first by residual", "", "19"),
+        ("match attempts (accepted / rejected)", "", "352 (283 / 69)"),
+    )
+    rows_b = (
+        ("max position deviation [m]", "", "26.9"),
+        ("mean position deviation [m]", "", "5.101"),
+        ("rejected first by residual", "", "21"),
+        ("match attempts (accepted / rejected)", "", "352 (282 / 70)"),
+    )
+    text = compare_markdown(session(1, rows_a), session(2, rows_b))
+    # B and B - A each after an en space: the columns ran together ('5.0550.000', '21+2')
+    assert "| max position deviation \\[m\\] | 27.2 | &ensp;26.9 | &ensp;-0.3 |" in text
+    assert "| mean position deviation \\[m\\] | 5.055 | &ensp;5.101 | &ensp;+0.046 |" in text
+    assert "| rejected first by residual | 19 | &ensp;21 | &ensp;+2 |" in text
+    assert "| 352 (283 / 69) | &ensp;352 (282 / 70) | &ensp; |" in text

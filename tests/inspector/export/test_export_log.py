@@ -464,3 +464,26 @@ def test_a_failed_export_leaves_no_empty_folder(bag, tmp_path):
     with pytest.raises(RoutefuseError):
         export_log(log, bad_route, kept)
     assert kept.is_dir()  # a folder the user made stays
+
+
+def test_the_replay_speed_menu_labels_the_exports_own_time_lapse_to_three_figures():
+    """The default time lapse is the log's length over the replay's: the menu showed it as
+    '4.44833x' beside '5x'. Its label is rounded; its value (what the page plays at) is not."""
+    from inspector.export.replay import replay_panel
+    from inspector.plots import DeviationPlot
+
+    t = np.linspace(0.0, 10.0, 50)
+    plot = DeviationPlot(t=t, position=(t, t), heading=(t, t), outages=())
+    speed = 266.9 / 60.0
+    panel = replay_panel(
+        _scene(n_matches=2),
+        plot,
+        degraded=(),
+        duration=10.0,
+        speed=speed,
+        title="x",
+        method="proposed",
+    )
+    assert f'<option value="{speed:g}" selected>4.45x</option>' in panel
+    assert '<option value="5">5x</option>' in panel
+    assert "4.44833x" not in panel
