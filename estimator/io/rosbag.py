@@ -7,6 +7,7 @@ from __future__ import annotations
 
 import contextlib
 import dataclasses
+import re
 import stat
 import tempfile
 from collections.abc import Callable, Iterator
@@ -48,6 +49,16 @@ def _guarded(progress: Callable[[float], None] | None) -> Callable[[float], None
     return report
 
 
+_ARGS_REPR = re.compile(r"""\((['"])(.*?)\1,?\)""")
+
+
+def _plain(reason: str) -> str:
+    """A library's message as a user reads it: rosbags words a damaged ROS 1 index as
+    ``Bag index looks damaged: ('Header could not be read from file.',)``, the repr of the
+    inner error's arguments; the tuple's text is kept, its Python punctuation dropped."""
+    return _ARGS_REPR.sub(lambda m: m.group(2), reason)
+
+
 @contextlib.contextmanager
 def _reading(path: Path, kind: str) -> Iterator[None]:
     """Turn rosbags' (and the storage libraries') exceptions into one-line LogErrors."""
@@ -58,7 +69,9 @@ def _reading(path: Path, kind: str) -> Iterator[None]:
     except _CallbackRaised as passed:
         raise passed.exc from None
     except Exception as exc:
-        reason = str(exc).strip().splitlines()[0] if str(exc).strip() else type(exc).__name__
+        reason = (
+            _plain(str(exc).strip().splitlines()[0]) if str(exc).strip() else type(exc).__name__
+        )
         if reason.lower().startswith("file magic is invalid"):
             raise LogError(path, f"not a {kind} ({reason})") from None
         raise LogError(

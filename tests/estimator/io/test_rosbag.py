@@ -330,6 +330,7 @@ def test_truncated_bag(tmp_path: Path, storage) -> None:
     with pytest.raises(LogError, match=r"truncated or corrupt \(") as err:
         load_log(cut, cache_dir=tmp_path / "c")
     assert str(err.value).startswith(str(cut))
+    assert "('" not in str(err.value) and ",)" not in str(err.value)  # no Python repr
 
 
 def test_missing_path_and_folder_without_metadata(tmp_path: Path) -> None:
