@@ -8,6 +8,7 @@ from typing import Any
 import numpy as np
 
 from estimator.matching.map_bias import MapBias
+from estimator.results import Run
 
 
 def map_bias(offset: Any = (0.0, 0.0), **fields: Any) -> MapBias:
@@ -29,3 +30,13 @@ def map_bias(offset: Any = (0.0, 0.0), **fields: Any) -> MapBias:
         "along_observed": False,
     }
     return MapBias(**{**defaults, **fields})
+
+
+def applied_per_outage(run: Run) -> list[bool]:
+    """Per GNSS-degraded interval of ``run``, whether its first attempt matched with a map
+    bias applied."""
+    applied = []
+    for a, b in run.degraded_intervals:
+        uses = [m.map_bias for m in run.matches if a <= m.t <= b and m.map_bias is not None]
+        applied.append(bool(uses and uses[0].applied))
+    return applied

@@ -15,7 +15,7 @@ from estimator.matching.map_bias import MapBias, carried_explains
 from estimator.params import Params, with_values
 from estimator.pipeline import run_methods
 from estimator.sim.stress import build, drive_spec
-from tests.estimator._map_biases import map_bias
+from tests.estimator._map_biases import applied_per_outage, map_bias
 
 CARRY = "extensions.map_bias_carry_turned"
 TURN = math.radians(-1.2)
@@ -70,10 +70,7 @@ def _run(values: dict[str, object]) -> tuple[list[bool], int, float, tuple[str, 
     accepted, the truth RMSE and the warnings."""
     inputs = build(drive_spec(30, corpus=3)).inputs
     run = run_methods(inputs, with_values(Params(), values), methods=("proposed",))["proposed"]
-    applied = []
-    for a, b in run.degraded_intervals:
-        uses = [m.map_bias for m in run.matches if a <= m.t <= b and m.map_bias is not None]
-        applied.append(bool(uses and uses[0].applied))
+    applied = applied_per_outage(run)
     truth = method_metrics(run, inputs.route, inputs.log).truth
     assert truth is not None and truth.rmse_h_err_m is not None
     return applied, sum(m.accepted for m in run.matches), truth.rmse_h_err_m, run.warnings

@@ -16,7 +16,7 @@ from estimator.pipeline import run_methods
 from estimator.pipeline.driver import keeps_carried
 from estimator.sim.stress import build, drive_spec
 from tests._session11_fit import SESSION_11_FIT
-from tests.estimator._map_biases import map_bias
+from tests.estimator._map_biases import applied_per_outage, map_bias
 
 GSF = "extensions.gyro_scale_state"
 KEEP = "extensions.map_bias_keep_applied"
@@ -47,10 +47,7 @@ def _outages(values: dict[str, object]) -> tuple[list[bool], float]:
     """Per outage of corpus drive 2, whether its map bias was applied; and the truth RMSE."""
     inputs = build(drive_spec(2)).inputs
     run = run_methods(inputs, with_values(Params(), values), methods=("proposed",))["proposed"]
-    applied = []
-    for a, b in run.degraded_intervals:
-        uses = [m.map_bias for m in run.matches if a <= m.t <= b and m.map_bias is not None]
-        applied.append(bool(uses and uses[0].applied))
+    applied = applied_per_outage(run)
     truth = method_metrics(run, inputs.route, inputs.log).truth
     assert truth is not None and truth.rmse_h_err_m is not None
     return applied, truth.rmse_h_err_m
