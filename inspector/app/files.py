@@ -93,7 +93,7 @@ class FilesPanel:
             (CHOOSE_LINE,),
             initial_value=CHOOSE_LINE,
             visible=False,
-            hint="this route file holds several lines: the one to open (as --route-feature)",
+            hint="the line of this route file to open (it holds several)",
         )
         self.route_line.on_update(self._on_route_line)
         self._lines: dict[str, int] = {}
