@@ -24,3 +24,25 @@ class RouteError(RoutefuseError):
 
 class ConfigError(RoutefuseError):
     """A parameter file or a parameter value that is invalid."""
+
+
+CHOOSE_LINE_BY_FLAG = "with --route-feature NAME_OR_INDEX"
+"""Where a command-line user chooses the line of a route file holding several."""
+
+
+class RouteLineError(RouteError):
+    """A route file holding several lines opened without choosing one, or with a choice that
+    names none of them. ``lines`` are the file's line names (in order); the message ends with
+    where to choose one, ``how`` (the command line's flag unless the caller, such as the
+    inspector, names its own control)."""
+
+    def __init__(
+        self,
+        source: str | Path | None,
+        problem: str,
+        *,
+        lines: tuple[str, ...],
+        how: str = CHOOSE_LINE_BY_FLAG,
+    ) -> None:
+        self.lines = lines
+        super().__init__(source, f"{problem}; choose one {how}")

@@ -68,6 +68,11 @@ __all__ = [
 ]
 
 
+RouteFeature = str | int | None
+"""which line of a route file holding several: an index, or text as ``--route-feature`` reads
+it (a name, else an index); None for a file's only line"""
+
+
 @dataclass(frozen=True)
 class Session:
     """Everything loaded and computed, immutable: tabs draw from it without locks."""
@@ -94,6 +99,9 @@ class Session:
     timings: dict[str, float] = field(default_factory=dict)
     off_route: OffRoute | None = None
     """the proposed run against the route (None for hand-built sessions)"""
+    route_feature: RouteFeature = None
+    """the line of a route file holding several (its index, or as ``--route-feature`` reads
+    text); None: the file's only line"""
 
 
 @dataclass(frozen=True)
@@ -106,6 +114,7 @@ class _Request:
     params: Params
     method: ProposedMethod
     outages: Outages
+    route_feature: RouteFeature
 
     @classmethod
     def of(
@@ -128,9 +137,17 @@ class _Request:
         """Would ``other`` show the same runs? (everything a run depends on)"""
         if other is None:
             return False
-        return (self.log_path, self.route_path, self.params, self.method, self.outages) == (
+        return (
+            self.log_path,
+            self.route_path,
+            self.route_feature,
+            self.params,
+            self.method,
+            self.outages,
+        ) == (
             other.log_path,
             other.route_path,
+            other.route_feature,
             other.params,
             other.method,
             other.outages,
@@ -191,10 +208,42 @@ class StageProgress(Protocol):
     def __call__(self, fraction: float = 0.0, message: str = "", /, *_: Any) -> None: ...
 
 
-def _default_open(log_path: Path, route_path: Path, progress: Callable[[float], None]) -> Inputs:
+ROUTE_LINE_FIELD = "route line"
+"""the Files tab's control that chooses the line of a route file holding several"""
+CHOOSE_LINE_IN_FILES_TAB = f"under '{ROUTE_LINE_FIELD}' in the Files tab, then press 'open'"
+"""where a browser user chooses it: the end of the message for a file opened without a line"""
+MAX_FEATURE_CHARS = 200
+"""a line name longer than this is not a line name (a browser may send anything)"""
+
+Opener = Callable[[Path, Path, Callable[[float], None], RouteFeature], "Inputs"]
+
+
+def _default_open(
+    log_path: Path,
+    route_path: Path,
+    progress: Callable[[float], None],
+    route_feature: RouteFeature,
+) -> Inputs:
     from estimator.pipeline.inputs import open_inputs
 
-    return open_inputs(log_path, route_path, progress=progress)
+    return open_inputs(
+        log_path,
+        route_path,
+        route_feature=route_feature,
+        route_feature_how=CHOOSE_LINE_IN_FILES_TAB,
+        progress=progress,
+    )
+
+
+def checked_route_feature(value: object) -> RouteFeature:
+    """``value`` as a route line choice (None, an index, or a name up to
+    :data:`MAX_FEATURE_CHARS`); anything else a one-line :class:`RoutefuseError`."""
+    if value is None or (isinstance(value, int) and not isinstance(value, bool)):
+        return value
+    if isinstance(value, str) and len(value) <= MAX_FEATURE_CHARS:
+        return value
+    shown = str(value)[:60]
+    raise RoutefuseError(ROUTE_LINE_FIELD, f"{shown!r} is not a line's name or index")
 
 
 def _default_run(
@@ -228,7 +277,7 @@ class Controller:
         uploads: UploadFolder | None = None,
         params: Params | None = None,
         method: ProposedMethod = "proposed",
-        opener: Callable[[Path, Path, Callable[[float], None]], Inputs] = _default_open,
+        opener: Opener = _default_open,
         runner: RunFn = _default_run,
     ) -> None:
         self.uploads = uploads
@@ -244,7 +293,8 @@ class Controller:
         self._busy = False
         self._version = 0
         self._session: Session | None = None
-        self._inputs_cache: tuple[tuple[Path, Path], Inputs] | None = None
+        self._inputs_cache: tuple[tuple[Path, Path, RouteFeature], Inputs] | None = None
+        self._lines_cache: dict[tuple[Path, int, int], tuple[str, ...]] = {}
         self._closed = False
         self._listeners = _Listeners()
         self._thread = threading.Thread(target=self._work, name="routefuse-runner", daemon=True)
@@ -314,11 +364,52 @@ class Controller:
 
     # -- requests -------------------------------------------------------------------------
 
-    def open_named(self, log_name: str, route_name: str) -> None:
-        """Open a log and a route by their names in :meth:`DataFolders.listing`."""
+    def open_named(
+        self, log_name: str, route_name: str, *, route_feature: RouteFeature = None
+    ) -> None:
+        """Open a log and a route by their names in :meth:`DataFolders.listing`
+        (``route_feature``: the line of a route file holding several)."""
         log_path = self._folders.resolve(log_name, "log")
         route_path = self._folders.resolve(route_name, "route")
-        self.open(log_path, route_path, log_name=log_name, route_name=route_name)
+        self.open(
+            log_path,
+            route_path,
+            log_name=log_name,
+            route_name=route_name,
+            route_feature=route_feature,
+        )
+
+    @property
+    def route_feature(self) -> RouteFeature:
+        """The route line of the latest request."""
+        latest = self._latest()
+        return latest.route_feature if latest else None
+
+    def route_lines(self, route_name: str) -> tuple[str, ...]:
+        """The names of the lines of a listed route file, in order (what the Files tab offers
+        to choose among); () when it cannot be read (opening it says why). Read again only
+        when the file changed."""
+        from estimator.io.routefile import route_line_names
+
+        try:
+            path = self._folders.resolve(route_name, "route")
+            info = path.stat()
+        except (RoutefuseError, OSError):
+            return ()
+        key = (path, info.st_mtime_ns, info.st_size)
+        with self._cond:
+            cached = self._lines_cache.get(key)
+        if cached is not None:
+            return cached
+        try:
+            names = route_line_names(path)
+        except RoutefuseError:
+            names = ()
+        with self._cond:
+            if len(self._lines_cache) > 64:
+                self._lines_cache.clear()
+            self._lines_cache[key] = names
+        return names
 
     def open(
         self,
@@ -328,11 +419,16 @@ class Controller:
         log_name: str | None = None,
         route_name: str | None = None,
         outages: Iterable[tuple[float, float]] | None = None,
+        route_feature: RouteFeature = None,
     ) -> None:
         """Open files by path (the CLI's arguments; the UI goes through :meth:`open_named`).
+        ``route_feature`` picks the line of a route file holding several (checked by the
+        worker, which reads the file: a file with several lines and none chosen, or no such
+        line, is reported and the session before is kept).
 
         Outages are times in one log, so another log starts with none unless ``outages`` says
         otherwise; the same log with another route keeps them (the tunnel test goes on)."""
+        route_feature = checked_route_feature(route_feature)
         log_path = Path(log_path).resolve()
         if outages is not None:
             kept = normalise_outages(outages)
@@ -349,6 +445,7 @@ class Controller:
             log_name=log_name or log_path.name,
             route_name=route_name or Path(route_path).name,
             outages=kept,
+            route_feature=route_feature,
         )
 
     def save_upload(self, filename: str, content: bytes) -> str:
@@ -402,6 +499,7 @@ class Controller:
                 "params": self._initial_params,
                 "method": self._initial_method,
                 "outages": self._initial_outages,
+                "route_feature": None,
             }
             self._version += 1
             req = _Request.of(self._version, base, initial, changes)
@@ -492,16 +590,16 @@ class Controller:
 
             return report
 
-        key = (req.log_path, req.route_path)
+        key = (req.log_path, req.route_path, req.route_feature)
         t_start = time.perf_counter()
-        if prev is not None and (prev.log_path, prev.route_path) == key:
+        if prev is not None and (prev.log_path, prev.route_path, prev.route_feature) == key:
             inputs = prev.inputs
         elif self._inputs_cache is not None and self._inputs_cache[0] == key:
             inputs = self._inputs_cache[1]
         else:
             loading = stage(0.0, 0.5, f"loading {req.log_name}")
             loading(0.0)
-            inputs = self._opener(req.log_path, req.route_path, loading)
+            inputs = self._opener(req.log_path, req.route_path, loading, req.route_feature)
             self._inputs_cache = (key, inputs)
         timings["open_s"] = time.perf_counter() - t_start
         if self._superseded(req):
@@ -580,4 +678,5 @@ def _session_of(
         deviation=deviation,
         timings=timings,
         off_route=off_route,
+        route_feature=req.route_feature,
     )

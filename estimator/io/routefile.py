@@ -22,7 +22,7 @@ from typing import Any
 import numpy as np
 from numpy.typing import NDArray
 
-from estimator.errors import RouteError
+from estimator.errors import CHOOSE_LINE_BY_FLAG, RouteError, RouteLineError
 from estimator.io.routeformats import ROUTE_SUFFIXES_TEXT, route_format
 from estimator.nav.frames import LocalFrame
 from estimator.route import Route
@@ -59,12 +59,14 @@ class _Candidate:
     points: list[tuple[float, float, float]]
 
 
-def read_route_file(path: str | Path, *, feature: str | int | None = None) -> RouteLine:
+def read_route_file(
+    path: str | Path, *, feature: str | int | None = None, how: str = CHOOSE_LINE_BY_FLAG
+) -> RouteLine:
     """The route polyline of a file. With several lines in the file (features, tracks,
-    placemarks), ``feature`` picks one by name or index; without it that is an error listing
-    them."""
+    placemarks), ``feature`` picks one by name or index (:func:`choose_line`); without it
+    that is an error listing them and saying ``how`` to choose one."""
     p = Path(path)
-    return _to_line(p, _choose(p, _candidates(p), feature))
+    return _to_line(p, _choose(p, _candidates(p), feature, how))
 
 
 def read_route_lines(path: str | Path) -> tuple[RouteLine, ...]:
@@ -168,36 +170,69 @@ def _read_text(p: Path) -> str:
     return text
 
 
-def _choose(p: Path, cands: list[_Candidate], feature: str | int | None) -> _Candidate:
+def _choose(
+    p: Path, cands: list[_Candidate], feature: str | int | None, how: str = CHOOSE_LINE_BY_FLAG
+) -> _Candidate:
     if not cands:
         raise RouteError(p, "no line geometry found (need a LineString, track or route)")
-    if feature is not None:
-        key = str(feature).strip()
-        by_name = [c for c in cands if c.name == key]
-        if len(by_name) == 1:
-            return by_name[0]
-        if key.lstrip("-").isdigit() and -len(cands) <= int(key) < len(cands):
-            return cands[int(key)]
-        what = "several" if by_name else "no"
-        raise RouteError(
-            p,
-            f"{what} line feature{'s' if by_name else ''} named or numbered {key!r}; "
-            f"the file has {_listing(cands)}",
-        )
-    if len(cands) > 1:
-        raise RouteError(
-            p,
-            f"the file has {_listing(cands)}; choose one with --route-feature NAME_OR_INDEX",
-        )
-    return cands[0]
+    return cands[choose_line(p, tuple(c.name for c in cands), feature, how=how)]
 
 
-def _listing(cands: list[_Candidate]) -> str:
-    names = ", ".join(
-        f"{i}: {_short(c.name) or '(unnamed)'}" for i, c in enumerate(cands[:MAX_LISTED_LINES])
+def choose_line(
+    path: str | Path,
+    names: tuple[str, ...],
+    feature: str | int | None,
+    *,
+    how: str = CHOOSE_LINE_BY_FLAG,
+) -> int:
+    """The index of the line ``feature`` picks among a route file's lines ``names``: an ``int``
+    is an index; text is a name, else an index (``--route-feature``'s NAME_OR_INDEX). Without
+    ``feature`` the only line; with several, or a ``feature`` naming none, a one-line
+    :class:`RouteLineError` listing them and saying ``how`` to choose one."""
+    if feature is None:
+        if len(names) > 1:
+            raise RouteLineError(path, f"the file has {_listing(names)}", lines=names, how=how)
+        return 0
+    if isinstance(feature, int):
+        if -len(names) <= feature < len(names):
+            return feature % len(names)
+        raise RouteLineError(
+            path,
+            f"no line numbered {feature}; the file has {_listing(names)}",
+            lines=names,
+            how=how,
+        )
+    key = str(feature).strip()
+    by_name = [i for i, name in enumerate(names) if name == key]
+    if len(by_name) == 1:
+        return by_name[0]
+    if key.lstrip("-").isdigit() and -len(names) <= int(key) < len(names):
+        return int(key) % len(names)
+    what = "several" if by_name else "no"
+    raise RouteLineError(
+        path,
+        f"{what} line feature{'s' if by_name else ''} named or numbered {_short(key)!r}; "
+        f"the file has {_listing(names)}",
+        lines=names,
+        how=how,
     )
-    more = f", ... {len(cands) - MAX_LISTED_LINES} more" if len(cands) > MAX_LISTED_LINES else ""
-    return f"{len(cands)} lines ({names}{more})"
+
+
+def route_line_names(path: str | Path) -> tuple[str, ...]:
+    """The names of a route file's lines, in order (what :func:`choose_line` chooses among;
+    a line without a name in the file has its place's, e.g. 'feature 1', or '')."""
+    return tuple(c.name for c in _candidates(Path(path)))
+
+
+def line_label(index: int, name: str) -> str:
+    """How a route file's line is named to a person: its index and (shortened) name."""
+    return f"{index}: {_short(name) or '(unnamed)'}"
+
+
+def _listing(names: tuple[str, ...]) -> str:
+    shown = ", ".join(line_label(i, n) for i, n in enumerate(names[:MAX_LISTED_LINES]))
+    more = f", ... {len(names) - MAX_LISTED_LINES} more" if len(names) > MAX_LISTED_LINES else ""
+    return f"{len(names)} line{'s' * (len(names) != 1)} ({shown}{more})"
 
 
 def _short(text: str, limit: int = 60) -> str:

@@ -8,7 +8,7 @@ import time
 
 import viser
 
-from estimator.errors import RoutefuseError
+from estimator.errors import RoutefuseError, RouteLineError
 from inspector.app.view import ClientView
 from inspector.controller import Controller, Session
 
@@ -74,6 +74,8 @@ class InspectorApp:
     def _on_error(self, exc: RoutefuseError) -> None:
         for view in self.views():
             view.set_progress(1.0, "")
+            if isinstance(exc, RouteLineError):  # offer the lines the file holds now
+                view.files.show_route_lines_again()
             view.notify_error(
                 exc,
                 "Could not load"

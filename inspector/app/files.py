@@ -9,16 +9,25 @@ from typing import TYPE_CHECKING, Any
 import viser
 from viser import _messages
 
-from estimator.errors import RoutefuseError
+from estimator.errors import RoutefuseError, RouteLineError
 from estimator.io import LOG_SUFFIXES_TEXT, ROUTE_SUFFIXES_TEXT
+from estimator.io.routefile import choose_line, line_label
 from inspector.app.widgets import Event, markdown_text, show_value
-from inspector.controller import Kind, Session, format_outages
+from inspector.controller import (
+    ROUTE_LINE_FIELD,
+    Kind,
+    RouteFeature,
+    Session,
+    format_outages,
+)
 
 if TYPE_CHECKING:
     from inspector.app.view import ClientView
 
 NONE = "(none)"
 """the dropdown entry when there is nothing to choose"""
+CHOOSE_LINE = "(choose a line)"
+"""the route line dropdown's entry before a line is chosen (opening it says to choose one)"""
 
 
 MAX_NOTES = 8
@@ -47,11 +56,20 @@ def _transfers(*guis: viser.GuiApi) -> list[tuple[str, dict[str, Any]]]:
 
 
 def loaded_markdown(session: Session) -> str:
-    """What is loaded: each file's name and full path, escaped."""
+    """What is loaded: each file's name and full path (and the route's line, when one was
+    chosen among several), escaped."""
+    line = ""
+    feature = session.route_feature
+    if feature is not None:
+        route = session.inputs.route
+        name = route.name if route is not None else str(feature)
+        shown = line_label(feature, name) if isinstance(feature, int) else name
+        line = f" · line **{markdown_text(shown)}**"
     return (
         f"**Loaded:** log **{markdown_text(session.log_name)}** "
         f"({markdown_text(str(session.log_path))}) · route "
         f"**{markdown_text(session.route_name)}** ({markdown_text(str(session.route_path))})"
+        f"{line}"
     )
 
 
@@ -70,8 +88,20 @@ class FilesPanel:
         self.log_choice.on_update(self._on_log_choice)
         self.route_choice = gui.add_dropdown("route file", routes, initial_value=routes[0])
         self.route_choice.on_update(self._on_route_choice)
+        self.route_line = gui.add_dropdown(
+            ROUTE_LINE_FIELD,
+            (CHOOSE_LINE,),
+            initial_value=CHOOSE_LINE,
+            visible=False,
+            hint="the line of this route file to open (it holds several)",
+        )
+        self.route_line.on_update(self._on_route_line)
+        self._lines: dict[str, int] = {}
+        """the route line dropdown's entries and the index of the line each names"""
         self._accepted: dict[Kind, str] = {"log": logs[0], "route": routes[0]}
         """the last choice of each dropdown that was in the listing (shown again on a refusal)"""
+        self._accepted_line = CHOOSE_LINE
+        self._show_lines(routes[0])
         self.open_button = gui.add_button("open", hint="load the chosen log and route")
         self.open_button.on_click(self._on_open)
         refresh = gui.add_button("refresh list")
@@ -161,24 +191,80 @@ class FilesPanel:
         return True
 
     def _on_route_choice(self, event: Event) -> None:
-        if event.client is not None:
-            self._accept("route")
+        if event.client is not None and self._accept("route"):
+            self._show_lines(self.route_choice.value)
+
+    def _on_route_line(self, event: Event) -> None:
+        """Accept a line of the dropdown's own (the browser may send any text)."""
+        if event.client is None:
+            return
+        value = self.route_line.value
+        if value == CHOOSE_LINE or value in self._lines:
+            self._accepted_line = value
+            return
+        self.view.notify_error(
+            RoutefuseError(ROUTE_LINE_FIELD, f"{value[:60]!r} is not a line of this file"),
+            "Refused",
+        )
+        show_value(self.route_line, self._accepted_line)
+
+    def _show_lines(self, route_name: str, chosen: RouteFeature | str = CHOOSE_LINE) -> None:
+        """Offer the lines of the route file ``route_name`` when it holds several (the control
+        is hidden otherwise), showing ``chosen`` (an index, a name, or an entry of the
+        dropdown's own) or else :data:`CHOOSE_LINE`."""
+        names = () if route_name == NONE else self.controller.route_lines(route_name)
+        if len(names) < 2:
+            self._lines = {}
+            self.route_line.options = (CHOOSE_LINE,)
+            self.route_line.visible = False
+            self._accepted_line = CHOOSE_LINE
+            return
+        self._lines = {line_label(i, name): i for i, name in enumerate(names)}
+        options = (CHOOSE_LINE, *self._lines)
+        if tuple(self.route_line.options) != options:
+            self.route_line.options = options
+        shown = CHOOSE_LINE
+        if isinstance(chosen, str) and chosen in options:
+            shown = chosen
+        elif chosen is not None and chosen != CHOOSE_LINE:
+            try:
+                index = choose_line(route_name, names, chosen)
+            except RouteLineError:
+                pass
+            else:
+                shown = options[1 + index]
+        self._accepted_line = shown
+        show_value(self.route_line, shown)
+        self.route_line.visible = True
 
     def _on_log_choice(self, event: Event) -> None:
         if event.client is None or not self._accept("log"):
             return
         route = self.controller.folders.default_route(self.log_choice.value)
-        if route is not None and route in self.route_choice.options:
+        if (
+            route is not None
+            and route in self.route_choice.options
+            and route != self.route_choice.value
+        ):
             self._show("route", route)
+            self._show_lines(route)
 
     def _on_open(self, event: Event) -> None:
         log, route = self.log_choice.value, self.route_choice.value
         if NONE in (log, route):
             self.view.notify_error(RoutefuseError(None, "choose a log and a route first"))
             return
+        line = self.route_line.value if self._lines else CHOOSE_LINE
+        if line != CHOOSE_LINE and line not in self._lines:
+            self.view.notify_error(
+                RoutefuseError(ROUTE_LINE_FIELD, f"{line[:60]!r} is not a line of {route}"),
+                "Refused",
+            )
+            return
+        feature = self._lines.get(line)  # None before a line is chosen: opening says to
         controller = self.controller
         before = controller.outages
-        self.view.guard(lambda: controller.open_named(log, route))
+        self.view.guard(lambda: controller.open_named(log, route, route_feature=feature))
         if before and not controller.outages:
             self.client.add_notification(
                 "GNSS outages not carried over",
@@ -199,6 +285,8 @@ class FilesPanel:
             self.view.app.refresh_files()
             if name in self._choice(kind).options:
                 self._show(kind, name)
+                if kind == "route":
+                    self._show_lines(name)
             self.client.add_notification(
                 "Uploaded", f"{name}: press 'open' to load it", auto_close_seconds=6.0
             )
@@ -213,6 +301,12 @@ class FilesPanel:
             self._show("log", session.log_name)
         if session.route_name in self.route_choice.options:
             self._show("route", session.route_name)
+            self._show_lines(session.route_name, session.route_feature)
+
+    def show_route_lines_again(self) -> None:
+        """Read the chosen route file's lines again, keeping the line shown if it is still
+        there (after a route line was refused: the file may have changed)."""
+        self._show_lines(self.route_choice.value, self.route_line.value)
 
     def _show(self, kind: Kind, name: str) -> None:
         """Show a listed file in the dropdown of ``kind`` (the server's own choice)."""
@@ -234,3 +328,4 @@ class FilesPanel:
                 self._show(kind, keep)
             else:
                 self._accepted[kind] = choice.value
+        self.show_route_lines_again()

@@ -13,6 +13,7 @@ from inspector.cli.checks import check_log, check_log_specs, route_for
 from inspector.cli.options import (
     add_outage_option,
     add_param_options,
+    add_route_feature_option,
     add_topic_options,
     params_from_args,
     parse_outage,
@@ -55,12 +56,7 @@ def add_arguments(parser: argparse.ArgumentParser) -> None:
         default=None,
         help="with --batch: a running Dask scheduler, e.g. tcp://head:8786",
     )
-    parser.add_argument(
-        "--route-feature",
-        metavar="NAME_OR_INDEX",
-        default=None,
-        help="which line of a route file that holds several",
-    )
+    add_route_feature_option(parser)
     parser.add_argument("--out", metavar="DIR", required=True, help="output folder")
     parser.add_argument(
         "--compare",

@@ -7,7 +7,7 @@ from pathlib import Path
 
 from estimator.io import LOG_FORMATS_TEXT, ROUTE_FORMATS_TEXT, route_format
 from inspector.cli.checks import check_log, check_route
-from inspector.cli.options import add_topic_options
+from inspector.cli.options import add_route_feature_option, add_topic_options
 
 NAME = "info"
 HELP = (
@@ -27,12 +27,7 @@ def add_arguments(parser: argparse.ArgumentParser) -> None:
         metavar="ROUTE",
         help=f"route file ({ROUTE_FORMATS_TEXT}) to compare with the log",
     )
-    parser.add_argument(
-        "--route-feature",
-        metavar="NAME_OR_INDEX",
-        default=None,
-        help="which line of a route file that holds several",
-    )
+    add_route_feature_option(parser)
     add_topic_options(parser)
 
 

@@ -68,6 +68,18 @@ def add_topic_options(parser: argparse.ArgumentParser) -> None:
     )
 
 
+def add_route_feature_option(parser: argparse.ArgumentParser) -> None:
+    """``--route-feature NAME_OR_INDEX``: the line of a route file holding several (the one
+    declaration of run, export, info and serve; :func:`estimator.io.routefile.choose_line`
+    reads it)."""
+    parser.add_argument(
+        "--route-feature",
+        metavar="NAME_OR_INDEX",
+        default=None,
+        help="which line of a route file that holds several (its name, or its index from 0)",
+    )
+
+
 def add_outage_option(parser: argparse.ArgumentParser) -> None:
     """``--outage START:END`` (repeatable), read with :func:`parse_outage`."""
     parser.add_argument(

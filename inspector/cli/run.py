@@ -18,6 +18,7 @@ from inspector.cli.checks import check_log, check_output_file, route_for
 from inspector.cli.options import (
     add_outage_option,
     add_param_options,
+    add_route_feature_option,
     add_topic_options,
     params_from_args,
     parse_outage,
@@ -44,12 +45,7 @@ def add_arguments(parser: argparse.ArgumentParser) -> None:
         default=None,
         help=f"route file ({ROUTE_FORMATS_TEXT}; default: LOG's <name>.route.* beside it)",
     )
-    parser.add_argument(
-        "--route-feature",
-        metavar="NAME_OR_INDEX",
-        default=None,
-        help="which line of a route file that holds several",
-    )
+    add_route_feature_option(parser)
     add_outage_option(parser)
     parser.add_argument(
         "--method",

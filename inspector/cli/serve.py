@@ -20,6 +20,7 @@ from inspector.cli.checks import check_log, route_for
 from inspector.cli.options import (
     add_outage_option,
     add_param_options,
+    add_route_feature_option,
     params_from_args,
     parse_outage,
 )
@@ -35,7 +36,7 @@ if TYPE_CHECKING:
 
     from estimator.params import Params
     from inspector.app import InspectorApp
-    from inspector.controller import Controller, Session
+    from inspector.controller import Controller, RouteFeature, Session
 
 MatchingMethod = Literal["proposed", "paper"]
 
@@ -60,6 +61,7 @@ def add_arguments(parser: argparse.ArgumentParser) -> None:
     parser.add_argument(
         "--route", metavar="ROUTE", help="route file (default: LOG's <name>.route.* beside it)"
     )
+    add_route_feature_option(parser)
     parser.add_argument(
         "--host", default="127.0.0.1", help="address to bind (default 127.0.0.1: this machine only)"
     )
@@ -119,6 +121,25 @@ def resolve_inputs(log: str | None, route: str | None) -> tuple[Path, Path]:
         check_log(log_path)
     route_path = route_for(log_path, route)
     return log_path.resolve(), route_path.resolve()
+
+
+def resolve_route_line(route: Path, feature: str | None) -> int | str | None:
+    """The line of the first route to open, checked before the server starts as ``run`` checks
+    it: a file holding several lines given without --route-feature, or with one naming none of
+    them, is a one-line error saying to give --route-feature. Returns the chosen line's index
+    (None for a file's only line, when none was given). A route file that cannot be read is
+    left to the inspector, which reports it with the server up (``feature`` returned as is)."""
+    from estimator.errors import RouteError
+    from estimator.io.routefile import choose_line, route_line_names
+
+    try:
+        names = route_line_names(route)
+    except RouteError:
+        return feature
+    if not names:
+        return feature
+    index = choose_line(route, names, feature)
+    return None if feature is None else index
 
 
 MAX_UPLOAD_MB = 100_000.0
@@ -185,6 +206,7 @@ def start(
     data_dirs: list[str | Path],
     log: Path | None = None,
     route: Path | None = None,
+    route_feature: RouteFeature = None,
     params: Params | None = None,
     method: MatchingMethod = "proposed",
     outages: Sequence[tuple[float, float]] = (),
@@ -194,8 +216,9 @@ def start(
 ) -> tuple[viser.ViserServer, Controller, InspectorApp]:
     """Start the server and the controller (returns ``(server, controller, app)``; used by the
     command and by the tests). ``outages`` are injected into the first log only: they are
-    times in that log. Websocket connections are accepted only from the server's own origin
-    and ``allow_origins`` (:mod:`inspector.origin_guard`)."""
+    times in that log; ``route_feature`` is the line of its route file. Websocket connections
+    are accepted only from the server's own origin and ``allow_origins``
+    (:mod:`inspector.origin_guard`)."""
     import viser
 
     from inspector import origin_guard
@@ -220,20 +243,27 @@ def start(
     server = viser.ViserServer(host=host, port=port, verbose=verbose)
     app = InspectorApp(server, controller)
     if log is not None and route is not None:
-        open_first(controller, log, route, outages)
+        open_first(controller, log, route, outages, route_feature=route_feature)
     return server, controller, app
 
 
 def open_first(
-    controller: Controller, log: Path, route: Path, outages: Sequence[tuple[float, float]] = ()
+    controller: Controller,
+    log: Path,
+    route: Path,
+    outages: Sequence[tuple[float, float]] = (),
+    *,
+    route_feature: RouteFeature = None,
 ) -> None:
-    """Start loading the log given on the command line (with the outages injected into it)."""
+    """Start loading the log given on the command line (with the outages injected into it, and
+    the line ``route_feature`` of its route file)."""
     controller.open(
         log,
         route,
         log_name=_listed_name(controller, log, "log"),
         route_name=_listed_name(controller, route, "route"),
         outages=outages,
+        route_feature=route_feature,
     )
 
 
@@ -258,6 +288,7 @@ def execute(args: argparse.Namespace) -> int:
     params = params_from_args(args)
     outages = tuple(parse_outage(o) for o in args.outage)
     log, route = resolve_inputs(args.log, args.route)
+    route_feature = resolve_route_line(route, args.route_feature)
     if args.host not in ("127.0.0.1", "localhost", "::1"):
         print(
             f"routefuse: warning: binding {args.host}: anyone who can reach this address can "
@@ -280,7 +311,8 @@ def execute(args: argparse.Namespace) -> int:
     injected = (
         f" and GNSS outages {format_outages(normalise_outages(outages))} s" if outages else ""
     )
-    print(f"loading {log.name} with route {route.name}{injected} ...", flush=True)
+    line = "" if route_feature is None else f" (line {route_feature})"
+    print(f"loading {log.name} with route {route.name}{line}{injected} ...", flush=True)
     if not kernels_cached():
         print(
             "(the first run on this machine compiles the filter kernels: about half a minute, "
@@ -304,7 +336,8 @@ def execute(args: argparse.Namespace) -> int:
             on_session=loaded,
             on_error=lambda exc: print(f"routefuse: error: {exc}", file=sys.stderr, flush=True),
         )
-        open_first(controller, log, route, outages)  # after subscribing: an early failure prints
+        # after subscribing: an early failure prints
+        open_first(controller, log, route, outages, route_feature=route_feature)
         for warning in controller.folders.listing().warnings:
             print(f"routefuse serve: warning: {warning[:300]}", file=sys.stderr, flush=True)
         while True:

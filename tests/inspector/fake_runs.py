@@ -101,7 +101,7 @@ def make_run(
     )
 
 
-def fake_open(log_path, route_path, progress):
+def fake_open(log_path, route_path, progress, route_feature=None):
     progress(0.5, "reading")
     if "bad" in str(log_path):
         from estimator.errors import LogError
@@ -130,3 +130,28 @@ def data_folder(tmp_path: Path) -> Path:
     (bag2 / "metadata.yaml").write_text("rosbag2_bagfile_information: {}")
     (bag2 / "ros2_bag_0.db3").write_bytes(b"x")
     return d
+
+
+HOSTILE_LINE = "<img src=x onerror=alert(1)>"
+"""a route line's name that runs script if a page renders it as HTML"""
+MONACO_LOG = Path(__file__).resolve().parents[2] / "sample_logs" / "monaco_tunnel.mcap"
+MONACO_ROUTE = MONACO_LOG.with_name("monaco_tunnel.route.geojson")
+
+
+def two_line_route(path: Path) -> Path:
+    """A GeoJSON FeatureCollection of two lines along the monaco sample's route: line 0 named
+    :data:`HOSTILE_LINE` (the route drawn backwards), line 1 'east' (the route)."""
+    import json
+
+    doc = json.loads(MONACO_ROUTE.read_text())
+    coords = doc["features"][0]["geometry"]["coordinates"]
+    feats = [
+        {
+            "type": "Feature",
+            "properties": {"name": name},
+            "geometry": {"type": "LineString", "coordinates": c},
+        }
+        for name, c in ((HOSTILE_LINE, coords[::-1]), ("east", coords))
+    ]
+    path.write_text(json.dumps({"type": "FeatureCollection", "features": feats}))
+    return path

@@ -167,8 +167,8 @@ class _Log:
         t = np.empty(0)
 
 
-def _open_with_log(log_path, route_path, progress):
-    inputs = fake_open(log_path, route_path, progress)
+def _open_with_log(log_path, route_path, progress, route_feature=None):
+    inputs = fake_open(log_path, route_path, progress, route_feature)
     return type(inputs)(log=_Log(), route=inputs.route, frame=inputs.frame)
 
 
@@ -276,5 +276,95 @@ def test_outages_set_before_anything_is_loaded_apply_to_the_first_log(tmp_path):
         c.open_named("data/drive.mcap", "data/drive.route.geojson")
         assert c.wait_idle(10) and c.session.outages == ((20.0, 50.0),)
         assert {o for _, o, _ in calls} == {((20.0, 50.0),)}
+    finally:
+        c.close()
+
+
+def _two_line_folder(tmp_path: Path) -> Path:
+    """A data folder with the monaco sample's log, its route, and a route file of two lines."""
+    import shutil
+
+    from fake_runs import MONACO_LOG, MONACO_ROUTE, two_line_route
+
+    d = tmp_path / "data"
+    d.mkdir()
+    shutil.copy(MONACO_LOG, d / "monaco.mcap")
+    shutil.copy(MONACO_ROUTE, d / "monaco.route.geojson")
+    two_line_route(d / "two.route.geojson")
+    return d
+
+
+def test_a_route_file_of_several_lines_opens_the_chosen_line_and_reruns_keep_it(tmp_path):
+    """The real opener: a file of two lines opened without a line is refused in one line that
+    says where the browser chooses one; the line chosen is carried by every later request."""
+    from fake_runs import HOSTILE_LINE
+
+    d = _two_line_folder(tmp_path)
+    errors: list[RoutefuseError] = []
+    c = Controller(DataFolders.of(d), runner=fake_run)
+    try:
+        c.subscribe(on_error=errors.append)
+        c.open_named("data/monaco.mcap", "data/monaco.route.geojson")
+        assert c.wait_idle(60) and c.session is not None and not errors
+        first = c.session
+        assert first.route_feature is None
+        assert c.route_lines("data/two.route.geojson") == (HOSTILE_LINE, "east")
+        assert c.route_lines("data/monaco.route.geojson") == ("monaco_tunnel route",)
+
+        c.open_named("data/monaco.mcap", "data/two.route.geojson")
+        assert c.wait_idle(60) and c.session is first  # the session before is kept
+        assert [str(e) for e in errors] == [
+            f"{d / 'two.route.geojson'}: the file has 2 lines (0: {HOSTILE_LINE}, 1: east); "
+            "choose one under 'route line' in the Files tab, then press 'open'"
+        ]
+
+        c.open_named("data/monaco.mcap", "data/two.route.geojson", route_feature=1)
+        assert c.wait_idle(60)
+        s = c.session
+        assert s is not first and s.route_feature == 1 and c.route_feature == 1
+        assert s.inputs.route.name == "east"
+        c.set_param("gates.max_residual_m", 2.5)  # a parameter change re-runs on that line
+        assert c.wait_idle(60) and c.session is not s
+        assert c.session.route_feature == 1 and c.session.inputs is s.inputs
+        assert len(errors) == 1
+    finally:
+        c.close()
+
+
+@pytest.mark.parametrize(
+    ("feature", "problem"),
+    [
+        (5, "no line numbered 5; the file has 2 lines"),
+        ("nope", "no line feature named or numbered 'nope'; the file has 2 lines"),
+    ],
+)
+def test_an_unknown_route_line_is_one_line_and_keeps_the_session(tmp_path, feature, problem):
+    d = _two_line_folder(tmp_path)
+    errors: list[RoutefuseError] = []
+    c = Controller(DataFolders.of(d), runner=fake_run)
+    try:
+        c.subscribe(on_error=errors.append)
+        c.open_named("data/monaco.mcap", "data/two.route.geojson", route_feature="east")
+        assert c.wait_idle(60) and c.session is not None
+        kept = c.session
+        c.open_named("data/monaco.mcap", "data/two.route.geojson", route_feature=feature)
+        assert c.wait_idle(60) and c.session is kept and kept.route_feature == "east"
+        assert len(errors) == 1
+        text = str(errors[0])
+        assert text.startswith(f"{d / 'two.route.geojson'}: {problem}") and "\n" not in text
+        # a later parameter change runs on the line loaded, not on the one refused
+        c.set_param("gates.max_residual_m", 2.5)
+        assert c.wait_idle(60) and c.session.route_feature == "east" and len(errors) == 1
+    finally:
+        c.close()
+
+
+def test_a_route_line_that_is_neither_name_nor_index_is_refused_at_once(tmp_path):
+    c = _controller(tmp_path)
+    try:
+        for bad in (object(), 1.5, "x" * 1000):
+            with pytest.raises(RoutefuseError, match=r"route line: .* is not a line's name"):
+                c.open_named("data/drive.mcap", "data/drive.route.geojson", route_feature=bad)
+        assert c.wait_idle(10) and c.session is None
     finally:
         c.close()

@@ -162,6 +162,39 @@ def test_several_lines_need_a_choice(tmp_path: Path) -> None:
         read_route_file(path, feature="east")
 
 
+def test_an_int_choice_is_an_index_and_the_message_says_where_to_choose(tmp_path: Path) -> None:
+    """The inspector's line dropdown passes an index: a line named '1' must not shadow line 1
+    (text is a name first, as --route-feature reads it). The caller names where to choose."""
+    from estimator.errors import RouteLineError
+    from estimator.io.routefile import choose_line, route_line_names
+
+    coords = [[o, a] for a, o in zip(LAT, LON, strict=True)]
+    feats = [
+        {
+            "type": "Feature",
+            "properties": {"name": n},
+            "geometry": {"type": "LineString", "coordinates": c},
+        }
+        for n, c in (("1", coords), ("south", coords[::-1]))
+    ]
+    path = _write(
+        tmp_path / "two.geojson", json.dumps({"type": "FeatureCollection", "features": feats})
+    )
+    names = route_line_names(path)
+    assert names == ("1", "south")
+    assert choose_line(path, names, 1) == 1 and choose_line(path, names, "1") == 0
+    assert choose_line(path, names, -1) == 1
+    assert read_route_file(path, feature=1).name == "south"
+    with pytest.raises(RouteLineError) as err:
+        read_route_file(path, how="in the picker")
+    assert str(err.value).endswith("(0: 1, 1: south); choose one in the picker")
+    assert err.value.lines == ("1", "south")
+    with pytest.raises(RouteLineError, match=r"no line numbered 2; the file has 2 lines"):
+        choose_line(path, names, 2)
+    with pytest.raises(RouteLineError, match=r"the file has 1 line \(0: x\); choose one with"):
+        choose_line(path, ("x",), "y")
+
+
 @pytest.mark.parametrize(
     ("name", "text", "problem"),
     [

@@ -130,7 +130,7 @@ def test_outages_reach_the_server_and_the_status_line(tmp_path, capsys, monkeypa
     def fake_start(**kw):
         return server, controller, app
 
-    def fake_open_first(ctl, log_path, route_path, outages):
+    def fake_open_first(ctl, log_path, route_path, outages, *, route_feature=None):
         opened.append((ctl, log_path, outages))
         raise RoutefuseError(None, "stop here")
 
@@ -203,3 +203,74 @@ def test_terminal_progress_is_a_line_per_stage_and_quarter(capsys):
         "  baseline (50 %)",
         "  baseline (75 %)",
     ]
+
+
+def _route_feature_action(command: str):
+    parser = build_parser()
+    sub = next(a for a in parser._actions if a.dest == "command" or a.choices)
+    return next(a for a in sub.choices[command]._actions if a.dest == "route_feature")
+
+
+def test_serve_has_run_s_route_feature_option():
+    """One declaration (options.add_route_feature_option) for every command that reads one."""
+    actions = [_route_feature_action(c) for c in ("serve", "run", "export", "info")]
+    assert {(a.option_strings[0], a.metavar, a.help) for a in actions} == {
+        (
+            "--route-feature",
+            "NAME_OR_INDEX",
+            "which line of a route file that holds several (its name, or its index from 0)",
+        )
+    }
+    args = build_parser().parse_args(["serve", "x.mcap", "--route-feature", "east"])
+    assert args.route_feature == "east"
+
+
+def test_the_route_line_is_checked_before_the_server_starts(tmp_path, capsys, monkeypatch):
+    """As ``run`` checks it: several lines and no --route-feature, or one naming none, is one
+    line saying to give --route-feature, and no server starts; a name becomes its index."""
+    from fake_runs import MONACO_LOG, two_line_route
+
+    from inspector.cli.main import main
+
+    route = two_line_route(tmp_path / "two.route.geojson")
+    assert serve.resolve_route_line(route, "east") == 1
+    assert serve.resolve_route_line(route, "0") == 0
+    assert serve.resolve_route_line(route.with_name("monaco.geojson"), None) is None  # missing
+    started: list = []
+    monkeypatch.setattr(serve, "start", lambda **kw: started.append(kw))
+    log = str(MONACO_LOG)
+    assert main(["serve", log, "--route", str(route)]) == 2
+    err = capsys.readouterr().err
+    assert err == (
+        f"routefuse: error: {route}: the file has 2 lines (0: <img src=x onerror=alert(1)>, "
+        "1: east); choose one with --route-feature NAME_OR_INDEX\n"
+    )
+    assert main(["serve", log, "--route", str(route), "--route-feature", "west"]) == 2
+    err = capsys.readouterr().err
+    assert err.startswith(f"routefuse: error: {route}: no line feature named or numbered 'west'")
+    assert err.count("\n") == 1
+    assert started == []
+
+
+def test_the_route_line_reaches_the_first_open(tmp_path, capsys, monkeypatch):
+    from fake_runs import MONACO_LOG, two_line_route
+
+    route = two_line_route(tmp_path / "two.route.geojson")
+    opened: list = []
+    controller = SimpleNamespace(subscribe=lambda **_: None, close=lambda: None)
+    server = SimpleNamespace(get_port=lambda: 1, stop=lambda: None)
+    app = SimpleNamespace(close=lambda: None)
+    monkeypatch.setattr(serve, "start", lambda **kw: (server, controller, app))
+
+    def fake_open_first(ctl, log_path, route_path, outages, *, route_feature=None):
+        opened.append((route_path, route_feature))
+        raise RoutefuseError(None, "stop here")
+
+    monkeypatch.setattr(serve, "open_first", fake_open_first)
+    args = build_parser().parse_args(
+        ["serve", str(MONACO_LOG), "--route", str(route), "--route-feature", "east"]
+    )
+    with pytest.raises(RoutefuseError, match="stop here"):
+        serve.execute(args)
+    assert opened == [(route.resolve(), 1)]
+    assert f"with route {route.name} (line 1) ..." in capsys.readouterr().out
