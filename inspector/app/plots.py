@@ -11,6 +11,9 @@ from inspector.controller import Session
 from inspector.plots import metrics_markdown, pinned_uplot
 
 DEVIATION_KINDS = ("position", "heading", "truth")
+PLOT_PADDING = (12, 12, 0, 0)
+"""uPlot's padding (top, right, bottom, left, px): room above the y axis's top label, which
+uPlot centres on the plot's top edge and the title above it cut in half"""
 
 
 class PlotsPanel:
@@ -75,6 +78,7 @@ class PlotsPanel:
                     scales=kw["scales"],
                     title=kw["title"],
                     aspect=aspect,
+                    padding=PLOT_PADDING,
                     order=order,
                 )
         else:
