@@ -360,11 +360,11 @@ def accel_bias_warnings(
             deg = math.degrees(math.asin(min(abs(b) / GRAVITY, 1.0)))
             return (
                 f"the accelerometer's {name} bias is estimated at {b:+.2f} m/s^2 "
-                f"({abs(b) / MG:.0f} mg) at the start of the outage at {a - t_start:.1f} s, "
+                f"({abs(b) / MG:.0f} mg) at the outage at {a - t_start:.1f} s, "
                 f"{abs(b) / prior:.0f} times its prior sigma (noise.accel_bias_init_sigma_mg "
                 f"{p.noise.accel_bias_init_sigma_mg:g} mg): gravity through an IMU mounted "
                 f"{deg:.1f} deg {minus if b < 0 else plus} that the config does not give "
-                f"({tilt})? Dead reckoning in the outages drifts with it",
+                f"({tilt})? The outages drift with it",
             )
     return ()
 

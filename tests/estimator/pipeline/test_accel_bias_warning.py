@@ -18,15 +18,15 @@ from estimator.io import TopicChoice
 from estimator.params import Params, load_params, with_values
 from estimator.pipeline import open_inputs, run_methods
 from estimator.pipeline.driver import accel_bias_warnings
+from inspector.app.playback import MAX_WARNING_CHARS
 
 CONFIG = Path(__file__).resolve().parents[3] / "sample_logs" / "configs" / "comma2k19_i280.toml"
 LINE = re.compile(
     r"the accelerometer's (?P<axis>forward|lateral) bias is estimated at (?P<b>[-+][\d.]+) "
-    r"m/s\^2 \((?P<mg>\d+) mg\) at the start of the outage at (?P<a>[\d.]+) s, (?P<n>\d+) times "
+    r"m/s\^2 \((?P<mg>\d+) mg\) at the outage at (?P<a>[\d.]+) s, (?P<n>\d+) times "
     r"its prior sigma \(noise.accel_bias_init_sigma_mg 10 mg\): gravity through an IMU mounted "
     r"(?P<deg>[\d.]+) deg (?P<how>nose-down|nose-up|rolled left|rolled right) that the config "
-    r"does not give \(sensors.imu_(?:pitch|roll)_deg\)\? Dead reckoning in the outages drifts "
-    r"with it$"
+    r"does not give \(sensors.imu_(?:pitch|roll)_deg\)\? The outages drift with it$"
 )
 
 
@@ -43,6 +43,7 @@ def test_a_bias_beyond_four_prior_sigmas_and_three_of_its_own_is_named_with_its_
     (line,) = accel_bias_warnings([nose_down], [(110.0, 150.0)], 10.0, Params())
     m = LINE.match(line)
     assert m is not None, line
+    assert len(line) <= MAX_WARNING_CHARS  # shown whole in the inspector
     assert (m["axis"], m["a"], m["deg"], m["how"], m["mg"]) == (
         "forward",
         "100.0",
