@@ -2,38 +2,21 @@
 
 from __future__ import annotations
 
-import socket
-
 import numpy as np
-import pytest
-import viser
 from fake_runs import T0, make_route, make_run
 
 from inspector.layers import SceneLayers
 from inspector.scene_data import SceneData
 
 
-def _free_port() -> int:
-    with socket.socket() as s:
-        s.bind(("127.0.0.1", 0))
-        return s.getsockname()[1]
-
-
-@pytest.fixture(scope="module")
-def server():
-    srv = viser.ViserServer(host="127.0.0.1", port=_free_port(), verbose=False)
-    yield srv
-    srv.stop()
-
-
-def test_draw_moves_the_vehicle_and_switches_the_match(server):
+def test_draw_moves_the_vehicle_and_switches_the_match(viser_server):
     data = SceneData.build(
         baseline=make_run(drift=30, method="baseline"),
         proposed=make_run(),
         route=make_route(),
         log=None,
     )
-    layers = SceneLayers(server.scene, root="/test1")
+    layers = SceneLayers(viser_server.scene, root="/test1")
     layers.set_data(data)
     pose = layers.layers["proposed"]._handles["pose"]
     match = layers.layers["match"]
@@ -54,11 +37,11 @@ def test_draw_moves_the_vehicle_and_switches_the_match(server):
     layers.remove()
 
 
-def test_toggling_a_layer_hides_its_nodes(server):
+def test_toggling_a_layer_hides_its_nodes(viser_server):
     data = SceneData.build(
         baseline=make_run(method="baseline"), proposed=make_run(), route=make_route(), log=None
     )
-    layers = SceneLayers(server.scene, root="/test2")
+    layers = SceneLayers(viser_server.scene, root="/test2")
     layers.set_data(data)
     layers.draw(T0 + 45)
     layers.set_visible("match", False)
@@ -72,7 +55,7 @@ def test_toggling_a_layer_hides_its_nodes(server):
     layers.remove()
 
 
-def _map_bias_layers(server, bias, root):
+def _map_bias_layers(viser_server, bias, root):
     """The layers of a run whose attempt shown at ``T0 + 45`` was matched with ``bias``."""
     import dataclasses
 
@@ -87,13 +70,13 @@ def _map_bias_layers(server, bias, root):
         route=make_route(),
         log=None,
     )
-    layers = SceneLayers(server.scene, root=root)
+    layers = SceneLayers(viser_server.scene, root=root)
     layers.set_data(data)
     layers.draw(T0 + 45)
     return layers
 
 
-def test_a_match_with_a_map_bias_draws_the_segment_where_the_map_has_it(server):
+def test_a_match_with_a_map_bias_draws_the_segment_where_the_map_has_it(viser_server):
     """With ``extensions.map_bias`` the window is matched to the route moved back by the
     learned bias; the map's own segment is drawn beside it, ``offset`` away, and hidden for a
     match without a bias."""
@@ -101,7 +84,7 @@ def test_a_match_with_a_map_bias_draws_the_segment_where_the_map_has_it(server):
 
     offset = np.array([6.0, -2.5])
     bias = MapBiasUse(offset=offset, cov=np.eye(2), along_observed=True)
-    layers = _map_bias_layers(server, bias, "/test3")
+    layers = _map_bias_layers(viser_server, bias, "/test3")
     match = layers.layers["match"]
     matched, on_map = match._handles["segment"].points, match._handles["map_segment"].points
     assert match._handles["map_segment"].visible and on_map.shape == matched.shape
@@ -111,7 +94,7 @@ def test_a_match_with_a_map_bias_draws_the_segment_where_the_map_has_it(server):
     layers.remove()
 
 
-def test_a_turned_map_bias_draws_the_segment_turned_about_where_it_was_learned(server):
+def test_a_turned_map_bias_draws_the_segment_turned_about_where_it_was_learned(viser_server):
     """A map turned about a point far into a long tunnel lies tens of metres more off at the
     vehicle than at the portal where the bias was learned: the map's segment is drawn where
     the turned bias puts it at the vehicle, not ``offset`` (the bias at the pivot) away."""
@@ -121,7 +104,7 @@ def test_a_turned_map_bias_draws_the_segment_turned_about_where_it_was_learned(s
     bias = MapBiasUse(
         offset=offset, cov=np.eye(2), along_observed=True, rotation_rad=rotation, pivot=pivot
     )
-    layers = _map_bias_layers(server, bias, "/test4")
+    layers = _map_bias_layers(viser_server, bias, "/test4")
     match = layers.layers["match"]
     matched = match._handles["segment"].points[..., :2]
     on_map = match._handles["map_segment"].points[..., :2]
