@@ -760,8 +760,9 @@ What this shows, and what it does not:
 ## The Husky parking lot: no road, no truth
 
 ```
-python scripts/validate_real.py   # writes the derived route to a temporary folder
-routefuse run ../shared/data/robot_localization/test1.bag --route husky_test1.route.geojson \\
+python scripts/validate_real.py --work /tmp/h --out /tmp/validation.md  # keeps the derived route
+routefuse run ../shared/data/robot_localization/test1.bag \\
+    --route /tmp/h/husky_test1.route.geojson \\
     --config sample_logs/configs/husky_test1.toml --outage 20:260
 ```
 
