@@ -637,6 +637,13 @@ def write_doc(
     hd = [d for _, d in h["cases"]]
     h_acc = sum(d["matches_by_method"]["proposed"]["accepted"] for d in hd)
     h_att = sum(d["matches_by_method"]["proposed"]["attempted"] for d in hd)
+    h_rejected: dict[str, int] = {}
+    for d in hd:
+        for gate, n in d["matches_by_method"]["proposed"]["rejected"].items():
+            h_rejected[gate] = h_rejected.get(gate, 0) + n
+    h_top = ", ".join(
+        f"{gate} {n}" for gate, n in sorted(h_rejected.items(), key=lambda kv: -kv[1])[:4]
+    )
     short = [d for o, d in h["cases"] if o.length <= 20]
     long_ = [d for o, d in h["cases"] if o.length >= 120]
     long_sol = [d for o, d in h["cases_sol"] if o.length >= 120]
@@ -812,11 +819,11 @@ What the method does here:
   {truth_mean(long_sol, "proposed", "rmse_h_err_m"):.2f} m, paper
   {truth_mean(long_sol, "paper", "rmse_h_err_m"):.2f} m. This is partly circular: the route is
   made of the same fixes. Over all outages {h_acc} of {h_att} attempts of the proposed method
-  were accepted; most rejections are the innovation (Mahalanobis) gate, the terminal heading
-  at corners, and the lane-continuity check (the "lane offset" learned before an outage is GNSS
-  wander here). Where the proposed method's validation rejects matches that `paper` accepts, the
-  paper's method can be closer to the fixes: it has no such checks, which is also what makes it
-  accept wrong matches on parallel roads.
+  were accepted. The gates that refused most, first in each attempt: {h_top}. On this lot
+  the "lane offset" learned before an outage is GNSS wander, which the lane-continuity check
+  refuses, and the terminal heading fails at corners. Where the proposed method's validation
+  rejects matches that `paper` accepts, the paper's method can be closer to the fixes: it has
+  no such checks, which is also what makes it accept wrong matches on parallel roads.
 - **Route heading deviation is not meaningful in a parking lot:** the robot turns on the spot
   and on radii of a few metres, which a line with 25 m vertices cannot follow, so the
   heading deviation is tens of degrees at every corner whatever the estimate.
