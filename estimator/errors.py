@@ -46,3 +46,33 @@ class RouteLineError(RouteError):
     ) -> None:
         self.lines = lines
         super().__init__(source, f"{problem}; choose one {how}")
+
+
+CHOOSE_TOPIC_BY_FLAG = "with --{kind}-topic TOPIC"
+"""Where a command-line user chooses the topic of a kind (``{kind}``: imu, gnss, wheel, truth)
+that a log holds several of."""
+
+
+class TopicError(LogError):
+    """A log holding several topics of a kind (``kind``: imu, gnss, wheel, truth) opened
+    without choosing one. ``found`` are the candidates; the message ends with where to choose
+    one, ``how`` (the command line's flag unless the caller, such as the inspector, names its
+    own way), as :class:`RouteLineError` does for a route file's lines."""
+
+    def __init__(
+        self,
+        source: str | Path | None,
+        problem: str,
+        *,
+        kind: str,
+        found: tuple[str, ...],
+        how: str = CHOOSE_TOPIC_BY_FLAG,
+    ) -> None:
+        self.kind = kind
+        self.found = found
+        self.bare_problem = problem
+        super().__init__(source, f"{problem}; choose one {how.format(kind=kind)}")
+
+    def choose(self, how: str) -> TopicError:
+        """The same error, saying ``how`` to choose one instead."""
+        return TopicError(self.source, self.bare_problem, kind=self.kind, found=self.found, how=how)

@@ -167,8 +167,8 @@ class _Log:
         t = np.empty(0)
 
 
-def _open_with_log(log_path, route_path, progress, route_feature=None):
-    inputs = fake_open(log_path, route_path, progress, route_feature)
+def _open_with_log(log_path, route_path, progress, route_feature=None, topics=None):
+    inputs = fake_open(log_path, route_path, progress, route_feature, topics)
     return type(inputs)(log=_Log(), route=inputs.route, frame=inputs.frame)
 
 
