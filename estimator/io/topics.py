@@ -104,9 +104,10 @@ def _pick(
         return None
     raise TopicError(
         path,
-        f"several {kind} topics: {', '.join(found)} (topics: {_listing(types)})",
+        f"several {kind} topics: {', '.join(found)}",
         kind=kind,
         found=tuple(found),
+        topics=_listing(types),
     )
 
 
