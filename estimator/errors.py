@@ -46,3 +46,45 @@ class RouteLineError(RouteError):
     ) -> None:
         self.lines = lines
         super().__init__(source, f"{problem}; choose one {how}")
+
+
+CHOOSE_TOPIC_BY_FLAG = "with --{kind}-topic TOPIC"
+"""Where a command-line user chooses the topic of a kind (``{kind}``: imu, gnss, wheel, truth)
+that a log holds several of."""
+
+
+class TopicError(LogError):
+    """A log holding several topics of a kind (``kind``: imu, gnss, wheel, truth) opened
+    without choosing one. ``found`` are the candidates; the message says where to choose one,
+    ``how`` (the command line's flag unless the caller, such as the inspector, names its own
+    way), as :class:`RouteLineError` does for a route file's lines, and then lists every topic
+    of the log, ``topics`` (last: a notification cut short loses the listing, not the way
+    out)."""
+
+    def __init__(
+        self,
+        source: str | Path | None,
+        problem: str,
+        *,
+        kind: str,
+        found: tuple[str, ...],
+        topics: str = "",
+        how: str = CHOOSE_TOPIC_BY_FLAG,
+    ) -> None:
+        self.kind = kind
+        self.found = found
+        self.topics = topics
+        self.bare_problem = problem
+        listing = f" (topics: {topics})" if topics else ""
+        super().__init__(source, f"{problem}; choose one {how.format(kind=kind)}{listing}")
+
+    def choose(self, how: str) -> TopicError:
+        """The same error, saying ``how`` to choose one instead."""
+        return TopicError(
+            self.source,
+            self.bare_problem,
+            kind=self.kind,
+            found=self.found,
+            topics=self.topics,
+            how=how,
+        )

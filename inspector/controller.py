@@ -20,6 +20,7 @@ from typing import TYPE_CHECKING, Any, Protocol
 import numpy as np
 
 from estimator.errors import RoutefuseError
+from estimator.io.topics import AUTO_TOPICS, TopicChoice
 from estimator.params import Params
 from estimator.results import Run
 from inspector.browser_values import (
@@ -102,6 +103,8 @@ class Session:
     route_feature: RouteFeature = None
     """the line of a route file holding several (its index, or as ``--route-feature`` reads
     text); None: the file's only line"""
+    topics: TopicChoice = AUTO_TOPICS
+    """the log's topics chosen by ``routefuse serve --imu-topic`` ... (``--no-wheel``)"""
 
 
 @dataclass(frozen=True)
@@ -115,6 +118,7 @@ class _Request:
     method: ProposedMethod
     outages: Outages
     route_feature: RouteFeature
+    topics: TopicChoice
 
     @classmethod
     def of(
@@ -141,6 +145,7 @@ class _Request:
             self.log_path,
             self.route_path,
             self.route_feature,
+            self.topics,
             self.params,
             self.method,
             self.outages,
@@ -148,6 +153,7 @@ class _Request:
             other.log_path,
             other.route_path,
             other.route_feature,
+            other.topics,
             other.params,
             other.method,
             other.outages,
@@ -212,10 +218,13 @@ ROUTE_LINE_FIELD = "route line"
 """the Files tab's control that chooses the line of a route file holding several"""
 CHOOSE_LINE_IN_FILES_TAB = f"under '{ROUTE_LINE_FIELD}' in the Files tab, then press 'open'"
 """where a browser user chooses it: the end of the message for a file opened without a line"""
+CHOOSE_TOPIC_AT_SERVE_START = "by restarting 'routefuse serve' with --{kind}-topic TOPIC"
+"""where a browser user chooses the topic of a log holding several of a kind (the topics are
+chosen for the whole server, on its command line)"""
 MAX_FEATURE_CHARS = 200
 """a line name longer than this is not a line name (a browser may send anything)"""
 
-Opener = Callable[[Path, Path, Callable[[float], None], RouteFeature], "Inputs"]
+Opener = Callable[[Path, Path, Callable[[float], None], RouteFeature, TopicChoice], "Inputs"]
 
 
 def _default_open(
@@ -223,14 +232,17 @@ def _default_open(
     route_path: Path,
     progress: Callable[[float], None],
     route_feature: RouteFeature,
+    topics: TopicChoice = AUTO_TOPICS,
 ) -> Inputs:
     from estimator.pipeline.inputs import open_inputs
 
     return open_inputs(
         log_path,
         route_path,
+        topics=topics,
         route_feature=route_feature,
         route_feature_how=CHOOSE_LINE_IN_FILES_TAB,
+        topics_how=CHOOSE_TOPIC_AT_SERVE_START,
         progress=progress,
     )
 
@@ -267,7 +279,8 @@ class Controller:
     Requests (:meth:`open`, :meth:`set_params`, ...) return at once; the worker serves the
     latest one. A run in progress is abandoned at its next progress report when a newer request
     arrives. A request that fails leaves the previous session in place and is reported to the
-    error listeners.
+    error listeners. ``topics`` (``routefuse serve --imu-topic`` ... ``--no-wheel``) apply to
+    every log opened, unless :meth:`open` is given others.
     """
 
     def __init__(
@@ -277,6 +290,7 @@ class Controller:
         uploads: UploadFolder | None = None,
         params: Params | None = None,
         method: ProposedMethod = "proposed",
+        topics: TopicChoice = AUTO_TOPICS,
         opener: Opener = _default_open,
         runner: RunFn = _default_run,
     ) -> None:
@@ -287,13 +301,16 @@ class Controller:
         self._initial_params = params or Params()
         self._initial_method: ProposedMethod = method
         self._initial_outages: Outages = ()
+        self._topics = topics
         self._cond = threading.Condition()
         self._wanted: _Request | None = None
         self._done_version = 0
         self._busy = False
         self._version = 0
         self._session: Session | None = None
-        self._inputs_cache: tuple[tuple[Path, Path, RouteFeature], Inputs] | None = None
+        self._inputs_cache: tuple[tuple[Path, Path, RouteFeature, TopicChoice], Inputs] | None = (
+            None
+        )
         self._lines_cache: dict[tuple[Path, int, int], tuple[str, ...]] = {}
         self._closed = False
         self._listeners = _Listeners()
@@ -365,10 +382,16 @@ class Controller:
     # -- requests -------------------------------------------------------------------------
 
     def open_named(
-        self, log_name: str, route_name: str, *, route_feature: RouteFeature = None
+        self,
+        log_name: str,
+        route_name: str,
+        *,
+        route_feature: RouteFeature = None,
+        topics: TopicChoice | None = None,
     ) -> None:
         """Open a log and a route by their names in :meth:`DataFolders.listing`
-        (``route_feature``: the line of a route file holding several)."""
+        (``route_feature``: the line of a route file holding several; ``topics``: the log's
+        topics, by default the server's)."""
         log_path = self._folders.resolve(log_name, "log")
         route_path = self._folders.resolve(route_name, "route")
         self.open(
@@ -377,7 +400,14 @@ class Controller:
             log_name=log_name,
             route_name=route_name,
             route_feature=route_feature,
+            topics=topics,
         )
+
+    @property
+    def topics(self) -> TopicChoice:
+        """The topics of the latest request (the server's before anything is loaded)."""
+        latest = self._latest()
+        return latest.topics if latest else self._topics
 
     @property
     def route_feature(self) -> RouteFeature:
@@ -420,11 +450,14 @@ class Controller:
         route_name: str | None = None,
         outages: Iterable[tuple[float, float]] | None = None,
         route_feature: RouteFeature = None,
+        topics: TopicChoice | None = None,
     ) -> None:
         """Open files by path (the CLI's arguments; the UI goes through :meth:`open_named`).
         ``route_feature`` picks the line of a route file holding several (checked by the
         worker, which reads the file: a file with several lines and none chosen, or no such
-        line, is reported and the session before is kept).
+        line, is reported and the session before is kept). ``topics`` choose the log's topics
+        (None: the server's, ``routefuse serve --imu-topic`` ...; a topic the log lacks, or
+        several of a kind and none chosen, is reported likewise).
 
         Outages are times in one log, so another log starts with none unless ``outages`` says
         otherwise; the same log with another route keeps them (the tunnel test goes on)."""
@@ -446,6 +479,7 @@ class Controller:
             route_name=route_name or Path(route_path).name,
             outages=kept,
             route_feature=route_feature,
+            topics=self._topics if topics is None else topics,
         )
 
     def save_upload(self, filename: str, content: bytes) -> str:
@@ -500,6 +534,7 @@ class Controller:
                 "method": self._initial_method,
                 "outages": self._initial_outages,
                 "route_feature": None,
+                "topics": self._topics,
             }
             self._version += 1
             req = _Request.of(self._version, base, initial, changes)
@@ -590,16 +625,23 @@ class Controller:
 
             return report
 
-        key = (req.log_path, req.route_path, req.route_feature)
+        key = (req.log_path, req.route_path, req.route_feature, req.topics)
         t_start = time.perf_counter()
-        if prev is not None and (prev.log_path, prev.route_path, prev.route_feature) == key:
+        prev_key = (
+            None
+            if prev is None
+            else (prev.log_path, prev.route_path, prev.route_feature, prev.topics)
+        )
+        if prev is not None and prev_key == key:
             inputs = prev.inputs
         elif self._inputs_cache is not None and self._inputs_cache[0] == key:
             inputs = self._inputs_cache[1]
         else:
             loading = stage(0.0, 0.5, f"loading {req.log_name}")
             loading(0.0)
-            inputs = self._opener(req.log_path, req.route_path, loading, req.route_feature)
+            inputs = self._opener(
+                req.log_path, req.route_path, loading, req.route_feature, req.topics
+            )
             self._inputs_cache = (key, inputs)
         timings["open_s"] = time.perf_counter() - t_start
         if self._superseded(req):
@@ -679,4 +721,5 @@ def _session_of(
         timings=timings,
         off_route=off_route,
         route_feature=req.route_feature,
+        topics=req.topics,
     )

@@ -7,7 +7,7 @@ from dataclasses import dataclass
 from pathlib import Path
 from typing import Any
 
-from estimator.errors import LogError
+from estimator.errors import LogError, TopicError
 from estimator.io.messages import FIX_TYPE, IMU_TYPE, ODOM_TYPE, TF_TYPE, TWIST_TYPE
 
 IMU_TYPES = (IMU_TYPE,)
@@ -102,10 +102,12 @@ def _pick(
             wanted = " or ".join(a.split("/")[-1] for a in accepted)
             raise LogError(path, f"no {kind.upper()} topic ({wanted}); topics: {_listing(types)}")
         return None
-    raise LogError(
+    raise TopicError(
         path,
-        f"several {kind} topics: {', '.join(found)}; choose one with --{kind}-topic "
-        f"(topics: {_listing(types)})",
+        f"several {kind} topics: {', '.join(found)}",
+        kind=kind,
+        found=tuple(found),
+        topics=_listing(types),
     )
 
 

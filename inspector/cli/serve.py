@@ -13,14 +13,15 @@ from collections.abc import Sequence
 from pathlib import Path
 from typing import TYPE_CHECKING, Literal
 
-from estimator.errors import RoutefuseError
-from estimator.io import route_beside
+from estimator.errors import LogError, RoutefuseError, TopicError
+from estimator.io import AUTO_TOPICS, TopicChoice, route_beside
 from estimator.io.registry import check_log_exists
 from inspector.cli.checks import check_log, route_for
 from inspector.cli.options import (
     add_outage_option,
     add_param_options,
     add_route_feature_option,
+    add_topic_options,
     params_from_args,
     parse_outage,
 )
@@ -95,6 +96,7 @@ def add_arguments(parser: argparse.ArgumentParser) -> None:
         default="proposed",
         help="method compared against the baseline (default proposed)",
     )
+    add_topic_options(parser)
     add_outage_option(parser)
     add_param_options(parser)
 
@@ -140,6 +142,39 @@ def resolve_route_line(route: Path, feature: str | None) -> int | str | None:
         return feature
     index = choose_line(route, names, feature)
     return None if feature is None else index
+
+
+def check_topics(log: Path, topics: TopicChoice) -> None:
+    """The topics chosen, checked against the first log before the server starts, as ``run``
+    checks them: several topics of a kind and none chosen is a one-line error saying to give
+    --imu-topic (or whichever kind), and so is a topic given that the log lacks (or of another
+    type), or --wheel-topic with --no-wheel; no server starts. A log whose topics cannot be
+    read, or that lacks an IMU or GNSS topic when no topic was given, is left to the
+    inspector, which reports it with the server up."""
+    from estimator.io import describe_topics
+    from estimator.io.topics import topic_roles
+
+    try:
+        types = {topic: msgtype for topic, (msgtype, _) in describe_topics(log).items()}
+    except LogError:
+        return
+    try:
+        topic_roles(log, types, topics)
+    except TopicError:
+        raise
+    except LogError:
+        if any((topics.imu, topics.gnss, topics.wheel, topics.truth)):
+            raise
+
+
+def topics_text(topics: TopicChoice) -> str:
+    """The topic options given, as on the command line ('' for none)."""
+    given = [
+        f"--{kind}-topic {name}"
+        for kind in ("imu", "gnss", "wheel", "truth")
+        if (name := getattr(topics, kind)) is not None
+    ]
+    return ", ".join([*given, *(["--no-wheel"] if topics.no_wheel else [])])
 
 
 MAX_UPLOAD_MB = 100_000.0
@@ -209,6 +244,7 @@ def start(
     route_feature: RouteFeature = None,
     params: Params | None = None,
     method: MatchingMethod = "proposed",
+    topics: TopicChoice = AUTO_TOPICS,
     outages: Sequence[tuple[float, float]] = (),
     max_upload_bytes: int = 100 * 1024 * 1024,
     allow_origins: Sequence[str] = (),
@@ -216,8 +252,9 @@ def start(
 ) -> tuple[viser.ViserServer, Controller, InspectorApp]:
     """Start the server and the controller (returns ``(server, controller, app)``; used by the
     command and by the tests). ``outages`` are injected into the first log only: they are
-    times in that log; ``route_feature`` is the line of its route file. Websocket connections
-    are accepted only from the server's own origin and ``allow_origins``
+    times in that log; ``route_feature`` is the line of its route file; ``topics`` (--imu-topic
+    ... --no-wheel) apply to every log opened, this one and those of the Files tab. Websocket
+    connections are accepted only from the server's own origin and ``allow_origins``
     (:mod:`inspector.origin_guard`)."""
     import viser
 
@@ -235,6 +272,7 @@ def start(
         uploads=UploadFolder(max_bytes=max_upload_bytes),
         params=params,
         method=method,
+        topics=topics,
     )
     try:
         origin_guard.install(allow_origins)
@@ -289,6 +327,8 @@ def execute(args: argparse.Namespace) -> int:
     outages = tuple(parse_outage(o) for o in args.outage)
     log, route = resolve_inputs(args.log, args.route)
     route_feature = resolve_route_line(route, args.route_feature)
+    topics = TopicChoice.from_args(args)
+    check_topics(log, topics)
     if args.host not in ("127.0.0.1", "localhost", "::1"):
         print(
             f"routefuse: warning: binding {args.host}: anyone who can reach this address can "
@@ -302,6 +342,7 @@ def execute(args: argparse.Namespace) -> int:
         data_dirs=args.data_dir,
         params=params,
         method=args.method,
+        topics=topics,
         outages=outages,
         max_upload_bytes=int(args.max_upload_mb * 1e6),
         allow_origins=args.allow_origin,
@@ -312,7 +353,8 @@ def execute(args: argparse.Namespace) -> int:
         f" and GNSS outages {format_outages(normalise_outages(outages))} s" if outages else ""
     )
     line = "" if route_feature is None else f" (line {route_feature})"
-    print(f"loading {log.name} with route {route.name}{line}{injected} ...", flush=True)
+    chosen = f" ({topics_text(topics)})" if topics != AUTO_TOPICS else ""
+    print(f"loading {log.name}{chosen} with route {route.name}{line}{injected} ...", flush=True)
     if not kernels_cached():
         print(
             "(the first run on this machine compiles the filter kernels: about half a minute, "

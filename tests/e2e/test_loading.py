@@ -32,10 +32,10 @@ def test_controls_wait_for_the_session_and_the_files_tab_names_it(browser, tmp_p
     try:
         opener = controller._opener
 
-        def slow_open(log_path, route_path, progress, route_feature):
+        def slow_open(log_path, route_path, progress, route_feature, topics):
             progress(0.1)
             release.wait(30)
-            return opener(log_path, route_path, progress, route_feature)
+            return opener(log_path, route_path, progress, route_feature, topics)
 
         controller._opener = slow_open
         page.goto(f"http://127.0.0.1:{server.get_port()}")

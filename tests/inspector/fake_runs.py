@@ -101,7 +101,7 @@ def make_run(
     )
 
 
-def fake_open(log_path, route_path, progress, route_feature=None):
+def fake_open(log_path, route_path, progress, route_feature=None, topics=None):
     progress(0.5, "reading")
     if "bad" in str(log_path):
         from estimator.errors import LogError
@@ -155,3 +155,43 @@ def two_line_route(path: Path) -> Path:
     ]
     path.write_text(json.dumps({"type": "FeatureCollection", "features": feats}))
     return path
+
+
+def two_imu_log(folder: Path) -> tuple[Path, Path]:
+    """A ROS 1 bag of a simulated 40 s drive holding two IMU topics, /imu/data and /imu/raw
+    (the same samples), with its GNSS and wheel topics, and its route beside it:
+    ``two_imu.bag`` and ``two_imu.route.geojson`` in ``folder``."""
+    import shutil
+
+    from rosbags.highlevel import AnyReader
+    from rosbags.rosbag1 import Writer
+    from rosbags.typesys import Stores, get_typestore
+
+    from estimator.io import BagTopics, write_bag
+    from estimator.sim.simulation import simulate
+
+    folder.mkdir(parents=True, exist_ok=True)
+    work = folder / ".two_imu_parts"
+    work.mkdir()
+    sim = simulate("short_tunnel", duration_s=40.0)
+    drive, route = sim.write(work, storage="ros1")
+    raw = work / "raw.bag"
+    write_bag(raw, imu=sim.imu, storage="ros1", topics=BagTopics(imu="/imu/raw"))
+    out = folder / "two_imu.bag"
+    typestore = get_typestore(Stores.ROS1_NOETIC)
+    messages = []
+    with Writer(out) as writer:
+        connections = {}
+        for source in (drive, raw):
+            with AnyReader([source]) as reader:
+                for c in reader.connections:
+                    if c.topic not in connections:
+                        connections[c.topic] = writer.add_connection(
+                            c.topic, c.msgtype, typestore=typestore
+                        )
+                messages += [(t, c.topic, data) for c, t, data in reader.messages()]
+        for t, topic, data in sorted(messages, key=lambda m: (m[0], m[1])):
+            writer.write(connections[topic], t, data)
+    shutil.copy(route, folder / "two_imu.route.geojson")
+    shutil.rmtree(work)
+    return out, folder / "two_imu.route.geojson"

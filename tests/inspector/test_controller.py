@@ -13,6 +13,7 @@ from fake_runs import data_folder, fake_open, fake_run
 
 from estimator.errors import ConfigError, RoutefuseError
 from estimator.params import Params, with_values
+from inspector.app.view import MAX_NOTE
 from inspector.controller import Controller, DataFolders
 
 
@@ -167,8 +168,8 @@ class _Log:
         t = np.empty(0)
 
 
-def _open_with_log(log_path, route_path, progress, route_feature=None):
-    inputs = fake_open(log_path, route_path, progress, route_feature)
+def _open_with_log(log_path, route_path, progress, route_feature=None, topics=None):
+    inputs = fake_open(log_path, route_path, progress, route_feature, topics)
     return type(inputs)(log=_Log(), route=inputs.route, frame=inputs.frame)
 
 
@@ -366,5 +367,82 @@ def test_a_route_line_that_is_neither_name_nor_index_is_refused_at_once(tmp_path
             with pytest.raises(RoutefuseError, match=r"route line: .* is not a line's name"):
                 c.open_named("data/drive.mcap", "data/drive.route.geojson", route_feature=bad)
         assert c.wait_idle(10) and c.session is None
+    finally:
+        c.close()
+
+
+def _two_imu_folder(tmp_path: Path) -> Path:
+    """A data folder with a log of two IMU topics (and its route) and the monaco sample's log,
+    which has one (/imu/data)."""
+    import shutil
+
+    from fake_runs import MONACO_LOG, MONACO_ROUTE, two_imu_log
+
+    d = tmp_path / "data"
+    two_imu_log(d)
+    shutil.copy(MONACO_LOG, d / "monaco.mcap")
+    shutil.copy(MONACO_ROUTE, d / "monaco.route.geojson")
+    return d
+
+
+def test_the_server_s_topics_apply_to_every_log_opened_and_reruns_keep_them(tmp_path):
+    """``routefuse serve --imu-topic /imu/raw --no-wheel``: the log of two IMU topics opens
+    on /imu/raw without its wheel speed, a parameter change re-runs on the same inputs; a log
+    without /imu/raw is refused in one line naming it, and the session before is kept."""
+    from estimator.io import TopicChoice
+
+    d = _two_imu_folder(tmp_path)
+    chosen = TopicChoice(imu="/imu/raw", no_wheel=True)
+    errors: list[RoutefuseError] = []
+    c = Controller(DataFolders.of(d), runner=fake_run, topics=chosen)
+    try:
+        c.subscribe(on_error=errors.append)
+        assert c.topics == chosen
+        c.open_named("data/two_imu.bag", "data/two_imu.route.geojson")
+        assert c.wait_idle(60) and not errors
+        s = c.session
+        assert s is not None and s.topics == chosen and c.topics == chosen
+        roles = {t.topic: t.role for t in s.inputs.log.topics}
+        assert roles["/imu/raw"] == "imu" and roles["/imu/data"] == ""
+        assert s.inputs.log.wheel is None and roles["/wheel/odom"] == ""
+        c.set_param("gates.max_residual_m", 2.5)  # a parameter change re-runs on those topics
+        assert c.wait_idle(60) and c.session is not s
+        assert c.session.topics == chosen and c.session.inputs is s.inputs
+
+        kept = c.session
+        c.open_named("data/monaco.mcap", "data/monaco.route.geojson")
+        assert c.wait_idle(60) and c.session is kept
+        assert len(errors) == 1
+        text = str(errors[0])
+        assert text.startswith(f"{d / 'monaco.mcap'}: no topic /imu/raw (--imu-topic); topics: ")
+        assert "\n" not in text
+        c.set_param("gates.max_residual_m", 3.0)  # the session kept still re-runs
+        assert c.wait_idle(60) and c.session.inputs is s.inputs and len(errors) == 1
+    finally:
+        c.close()
+
+
+def test_several_imu_topics_in_the_browser_say_to_restart_serve_with_the_flag(tmp_path):
+    """A log of two IMU topics opened from the Files tab with no topic chosen: one line saying
+    where a browser user chooses (the server's command line), the session before kept."""
+    d = _two_imu_folder(tmp_path)
+    errors: list[RoutefuseError] = []
+    c = Controller(DataFolders.of(d), runner=fake_run)
+    try:
+        c.subscribe(on_error=errors.append)
+        c.open_named("data/monaco.mcap", "data/monaco.route.geojson")
+        assert c.wait_idle(60) and c.session is not None and not errors
+        kept = c.session
+        c.open_named("data/two_imu.bag", "data/two_imu.route.geojson")
+        assert c.wait_idle(60) and c.session is kept
+        assert len(errors) == 1
+        text = str(errors[0])
+        way_out = "; choose one by restarting 'routefuse serve' with --imu-topic TOPIC (topics: "
+        assert text.startswith(
+            f"{d / 'two_imu.bag'}: several imu topics: /imu/data, /imu/raw{way_out}"
+        )
+        assert "\n" not in text and "choose one with --imu-topic" not in text
+        # the way out is within what a notification shows (the topic listing may be cut)
+        assert text.index(way_out) + len(way_out) <= MAX_NOTE
     finally:
         c.close()

@@ -274,3 +274,86 @@ def test_the_route_line_reaches_the_first_open(tmp_path, capsys, monkeypatch):
         serve.execute(args)
     assert opened == [(route.resolve(), 1)]
     assert f"with route {route.name} (line 1) ..." in capsys.readouterr().out
+
+
+TOPIC_DESTS = ("imu_topic", "gnss_topic", "wheel_topic", "truth_topic", "no_wheel")
+
+
+def _actions(command: str) -> dict[str, tuple]:
+    parser = build_parser()
+    sub = next(a for a in parser._actions if a.dest == "command" or a.choices)
+    return {
+        a.dest: (tuple(a.option_strings), a.metavar, a.help, a.default)
+        for a in sub.choices[command]._actions
+        if a.dest in TOPIC_DESTS
+    }
+
+
+def test_serve_has_run_s_topic_options():
+    """One declaration (options.add_topic_options) for run, export, info and serve."""
+    serve_actions = _actions("serve")
+    assert set(serve_actions) == set(TOPIC_DESTS)
+    for command in ("run", "export", "info"):
+        assert _actions(command) == serve_actions
+    args = build_parser().parse_args(["serve", "x.bag", "--imu-topic", "/imu/raw", "--no-wheel"])
+    from estimator.io import TopicChoice
+
+    assert TopicChoice.from_args(args) == TopicChoice(imu="/imu/raw", no_wheel=True)
+
+
+def test_the_topics_are_checked_before_the_server_starts(tmp_path, capsys, monkeypatch):
+    """As ``run`` checks them: a log of two IMU topics and no --imu-topic, a topic the log
+    lacks, or --wheel-topic with --no-wheel is one line naming the flag, exit 2, and no server
+    starts."""
+    from fake_runs import two_imu_log
+
+    from inspector.cli.main import main
+
+    log, _ = two_imu_log(tmp_path / "data")
+    started: list = []
+    monkeypatch.setattr(serve, "start", lambda **kw: started.append(kw))
+    assert main(["serve", str(log)]) == 2
+    err = capsys.readouterr().err
+    assert err.startswith(
+        f"routefuse: error: {log}: several imu topics: /imu/data, /imu/raw; choose one with "
+        "--imu-topic TOPIC (topics: /gnss/fix (NavSatFix), "
+    )
+    assert err.count("\n") == 1
+    assert main(["serve", str(log), "--imu-topic", "/imu/nope"]) == 2
+    err = capsys.readouterr().err
+    assert err.startswith(f"routefuse: error: {log}: no topic /imu/nope (--imu-topic); topics: ")
+    assert err.count("\n") == 1
+    args = ["serve", str(log), "--imu-topic", "/imu/raw", "--wheel-topic", "/wheel/odom"]
+    assert main([*args, "--no-wheel"]) == 2
+    assert capsys.readouterr().err == (
+        f"routefuse: error: {log}: --wheel-topic /wheel/odom and --no-wheel contradict each other\n"
+    )
+    assert started == []
+
+
+def test_the_topics_reach_the_controller_and_the_status_line(tmp_path, capsys, monkeypatch):
+    from fake_runs import two_imu_log
+
+    from estimator.io import TopicChoice
+
+    log, _ = two_imu_log(tmp_path / "data")
+    started: list = []
+    controller = SimpleNamespace(subscribe=lambda **_: None, close=lambda: None)
+    server = SimpleNamespace(get_port=lambda: 1, stop=lambda: None)
+    app = SimpleNamespace(close=lambda: None)
+
+    def fake_start(**kw):
+        started.append(kw)
+        return server, controller, app
+
+    def fake_open_first(ctl, log_path, route_path, outages, *, route_feature=None):
+        raise RoutefuseError(None, "stop here")
+
+    monkeypatch.setattr(serve, "start", fake_start)
+    monkeypatch.setattr(serve, "open_first", fake_open_first)
+    args = build_parser().parse_args(["serve", str(log), "--imu-topic", "/imu/raw", "--no-wheel"])
+    with pytest.raises(RoutefuseError, match="stop here"):
+        serve.execute(args)
+    assert [kw["topics"] for kw in started] == [TopicChoice(imu="/imu/raw", no_wheel=True)]
+    out = capsys.readouterr().out
+    assert "loading two_imu.bag (--imu-topic /imu/raw, --no-wheel) with route" in out
