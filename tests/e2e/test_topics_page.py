@@ -52,6 +52,8 @@ def test_a_log_of_two_imu_topics_says_to_restart_serve_with_the_flag(browser, tm
             "'routefuse serve' with --imu-topic TOPIC"
         ) in body
         assert controller.session is first
+        page.wait_for_timeout(1500)  # the notification's slide-in
+        page.screenshot(path=str(tmp_path / "topics.png"))
         page.close()
 
 
