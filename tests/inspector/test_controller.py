@@ -3,8 +3,10 @@ re-runs, and the outages it injects."""
 
 from __future__ import annotations
 
+import contextlib
 import threading
 import time
+from collections.abc import Iterator
 from pathlib import Path
 
 import numpy as np
@@ -295,18 +297,28 @@ def _two_line_folder(tmp_path: Path) -> Path:
     return d
 
 
-def test_a_route_file_of_several_lines_opens_the_chosen_line_and_reruns_keep_it(tmp_path):
-    """The real opener: a file of two lines opened without a line is refused in one line that
-    says where the browser chooses one; the line chosen is carried by every later request."""
-    from fake_runs import HOSTILE_LINE
-
-    d = _two_line_folder(tmp_path)
+@contextlib.contextmanager
+def _opened_on_monaco(d: Path) -> Iterator[tuple[Controller, list[RoutefuseError]]]:
+    """A controller over ``d`` with the monaco sample open (no error) and the errors it
+    reports from then on; closed afterwards."""
     errors: list[RoutefuseError] = []
     c = Controller(DataFolders.of(d), runner=fake_run)
     try:
         c.subscribe(on_error=errors.append)
         c.open_named("data/monaco.mcap", "data/monaco.route.geojson")
         assert c.wait_idle(60) and c.session is not None and not errors
+        yield c, errors
+    finally:
+        c.close()
+
+
+def test_a_route_file_of_several_lines_opens_the_chosen_line_and_reruns_keep_it(tmp_path):
+    """The real opener: a file of two lines opened without a line is refused in one line that
+    says where the browser chooses one; the line chosen is carried by every later request."""
+    from fake_runs import HOSTILE_LINE
+
+    d = _two_line_folder(tmp_path)
+    with _opened_on_monaco(d) as (c, errors):
         first = c.session
         assert first.route_feature is None
         assert c.route_lines("data/two.route.geojson") == (HOSTILE_LINE, "east")
@@ -328,8 +340,6 @@ def test_a_route_file_of_several_lines_opens_the_chosen_line_and_reruns_keep_it(
         assert c.wait_idle(60) and c.session is not s
         assert c.session.route_feature == 1 and c.session.inputs is s.inputs
         assert len(errors) == 1
-    finally:
-        c.close()
 
 
 @pytest.mark.parametrize(
@@ -426,12 +436,7 @@ def test_several_imu_topics_in_the_browser_say_to_restart_serve_with_the_flag(tm
     """A log of two IMU topics opened from the Files tab with no topic chosen: one line saying
     where a browser user chooses (the server's command line), the session before kept."""
     d = _two_imu_folder(tmp_path)
-    errors: list[RoutefuseError] = []
-    c = Controller(DataFolders.of(d), runner=fake_run)
-    try:
-        c.subscribe(on_error=errors.append)
-        c.open_named("data/monaco.mcap", "data/monaco.route.geojson")
-        assert c.wait_idle(60) and c.session is not None and not errors
+    with _opened_on_monaco(d) as (c, errors):
         kept = c.session
         c.open_named("data/two_imu.bag", "data/two_imu.route.geojson")
         assert c.wait_idle(60) and c.session is kept
@@ -444,5 +449,3 @@ def test_several_imu_topics_in_the_browser_say_to_restart_serve_with_the_flag(tm
         assert "\n" not in text and "choose one with --imu-topic" not in text
         # the way out is within what a notification shows (the topic listing may be cut)
         assert text.index(way_out) + len(way_out) <= MAX_NOTE
-    finally:
-        c.close()
