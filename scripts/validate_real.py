@@ -824,8 +824,9 @@ What the method does here:
   {truth_mean(long_sol, "paper", "rmse_h_err_m"):.2f} m. This is partly circular: the route is
   made of the same fixes. Over all outages {h_acc} of {h_att} attempts of the proposed method
   were accepted. The gates that refused most, first in each attempt: {h_top}. On this lot
-  the "lane offset" learned before an outage is GNSS wander, which the lane-continuity check
-  refuses, and the terminal heading fails at corners. Where the proposed method's validation
+  a window often fits another stretch of the lot's line, metres off along it, which the
+  innovation gate refuses, and the terminal heading fails at corners. Where the proposed
+  method's validation
   rejects matches that `paper` accepts, the paper's method can be closer to the fixes: it has
   no such checks, which is also what makes it accept wrong matches on parallel roads.
 - **Route heading deviation is not meaningful in a parking lot:** the robot turns on the spot
@@ -851,11 +852,15 @@ What the method does here:
   fits the DR track loosely it is wrong, so a looser sigma would only let the innovation gate
   pass bad matches (measured while choosing it: 156 of 298 attempts accepted instead of 103 of
   295, the long outages' mean RMSE against the fixes 5.84 instead of 3.92 m).
-- **`extensions.weak_along_track`** (on by default, chosen on simulated drives) is the switch
-  that takes most of this lot's matches: compare the last two rows. With it on, the refusals
-  are mostly the lane-continuity and dead-reckoning separation gates; why the switch leads to
-  them here is not traced. Not changed: the switch was chosen on the stress corpus, and this
-  lot's route is its own GNSS.
+- **`extensions.weak_along_track`** (on by default, chosen on simulated drives) applies a fit
+  across the road only when its along-track sigma is larger than the filter's and its along-track
+  position far from the filter's. Until `pseudo.weak_along_max_chi2` (session 17) it did so also
+  for fits that were far off by their own sigma too: on this lot, windows paired with another
+  stretch of the line, 25 m off along it at a 3.2 m sigma, were applied across the road; the
+  dead-reckoning separation gate then undid the outage's route updates and refused every later
+  attempt (the 20-260 s outage at 3986458: 4 of 75 accepted, 12.76 m against the fixes, against
+  the baseline's 12.98 m). Such a fit now goes whole to the innovation gate, which refuses it, as
+  with the switch off: compare the last two rows.
 """
     if sample is not None:
         sample_table, sample_delta = sample

@@ -57,6 +57,9 @@ class FitSettings:
     weak_along_disagreement: float = 0.0
     """``pseudo.weak_along_disagreement``: ... and disagreeing with the filter's along-track
     position by more than this many of its sigmas (0: always)"""
+    weak_along_max_chi2: float = float("inf")
+    """``pseudo.weak_along_max_chi2``: ... but within this chi-square of the fit's and the
+    filter's along-track sigmas together"""
     window_scale_sigma_m: float = 0.0
     """``extensions.window_scale_covariance``: 1-sigma of the attempt's window length error
     (the filter's along-track velocity sigma times the window's duration), added to an
@@ -121,6 +124,7 @@ def _settings(params: Params) -> FitSettings:
         plausible_place=ext.covariance_search and ext.along_track_search,
         weak_along_track=ext.weak_along_track and ext.geometry_covariance,
         weak_along_disagreement=po.weak_along_disagreement,
+        weak_along_max_chi2=po.weak_along_max_chi2,
     )
 
 
@@ -238,7 +242,14 @@ def fit_window(
     if (
         observed
         and settings.weak_along_track
-        and _weaker_than_filter(sigma, along, tangent, pos_cov2, settings.weak_along_disagreement)
+        and _weaker_than_filter(
+            sigma,
+            along,
+            tangent,
+            pos_cov2,
+            settings.weak_along_disagreement,
+            settings.weak_along_max_chi2,
+        )
     ):
         p_ref = p_ref - along * tangent
         s_ref -= along
@@ -276,19 +287,32 @@ def fit_window(
 
 
 def _weaker_than_filter(
-    along_sigma: float, along: float, tangent: F64, pos_cov2: F64 | None, disagreement: float
+    along_sigma: float,
+    along: float,
+    tangent: F64,
+    pos_cov2: F64 | None,
+    disagreement: float,
+    max_chi2: float,
 ) -> bool:
-    """The fit's along-track sigma exceeds the filter's own along the road, and its along-track
-    innovation ``along`` exceeds ``disagreement`` of the filter's along-track sigmas.
+    """The fit's along-track sigma exceeds the filter's own along the road, its along-track
+    innovation ``along`` exceeds ``disagreement`` of the filter's along-track sigmas, and is
+    within ``max_chi2`` of both sigmas together:
+    along^2 / (sigma_fit^2 + t' P t) <= max_chi2.
 
     Why the second test: the fits of overlapping windows carry one shape error, attempt after
     attempt, so a weak fit far outside the filter's own along-track uncertainty is more likely
-    that error than news; one within it is the along-track evidence a long tunnel lives on."""
+    that error than news; one within it is the along-track evidence a long tunnel lives on.
+    Why the third: a fit that is off by many of its own sigmas too is not weak but wrong (paired
+    with another stretch of the route); applied across the road it would pass the innovation
+    gate that refuses it whole (the Husky's parking lot: 25 m off at 3.2 m, chi-square 60)."""
     if pos_cov2 is None:
         return False
     var_p = float(tangent @ pos_cov2 @ tangent)
     return bool(
-        np.isfinite(var_p) and along_sigma**2 > var_p and along * along > disagreement**2 * var_p
+        np.isfinite(var_p)
+        and along_sigma**2 > var_p
+        and along * along > disagreement**2 * var_p
+        and along * along <= max_chi2 * (along_sigma**2 + var_p)
     )
 
 

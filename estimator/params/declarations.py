@@ -296,6 +296,15 @@ class PseudoObsParams:
         hi=100,
         step=0.5,
     )
+    weak_along_max_chi2: float = param(
+        13.8,
+        "extensions.weak_along_track applies a fit across the road only while its along-track "
+        "innovation is within this chi-square of the fit's and the filter's along-track sigmas "
+        "together (1 dof); a fit farther off is wrong, not weak, and goes to the gates whole",
+        lo=1,
+        hi=1000,
+        step=0.5,
+    )
 
 
 @dataclass(frozen=True)

@@ -234,6 +234,7 @@ def resume(d: Driver, old: ReuseState, old_params: Params, *, reuse_matching: bo
             for name in MATCHING_EXTENSIONS
         )
         and p.pseudo.weak_along_disagreement == old_params.pseudo.weak_along_disagreement
+        and p.pseudo.weak_along_max_chi2 == old_params.pseudo.weak_along_max_chi2
         and (
             not p.extensions.dr_separation
             or (

@@ -10,7 +10,7 @@ from hypothesis import given, settings
 from hypothesis import strategies as st
 
 from estimator.matching import FitSettings, Polyline, fit_rivals, fit_window, kabsch_2d
-from estimator.matching.fit import fit_cost
+from estimator.matching.fit import _weaker_than_filter, fit_cost
 from estimator.matching.gates import ShapeValues
 from estimator.matching.geometry import local_piece
 from estimator.matching.kernels import scan_offsets
@@ -243,3 +243,33 @@ def test_pointwise_residual_is_the_kabsch_residual_to_rounding():
         assert a is not None and b is not None
         assert a.residual == pytest.approx(b.residual, rel=1e-9)
         np.testing.assert_array_equal(a.rotation, b.rotation)
+
+
+@pytest.mark.parametrize(
+    ("along_m", "fit_sigma_m", "applied_across_only"),
+    [
+        (12.0, 7.0, True),  # the drift bend's fits: weak, and within their own sigma
+        (0.5, 7.0, False),  # within 5 of the filter's sigmas: used whole
+        (25.0, 3.2, False),  # the Husky lot's other stretch: off by its own sigma too, wrong
+        (12.0, 0.5, False),  # stronger than the filter: used whole
+    ],
+)
+def test_weak_along_track_only_takes_a_weak_fit_that_its_own_sigma_allows(
+    along_m: float, fit_sigma_m: float, applied_across_only: bool
+) -> None:
+    """``pseudo.weak_along_max_chi2``: a fit off along the road by more than its own and the
+    filter's sigmas together allow is not weak but wrong; applied across the road it would pass
+    the innovation gate that refuses it whole."""
+    tangent = np.array([1.0, 0.0])
+    filter_cov = np.diag([0.6**2, 0.6**2])
+    p = Params().pseudo
+    got = _weaker_than_filter(
+        fit_sigma_m,
+        along_m,
+        tangent,
+        filter_cov,
+        p.weak_along_disagreement,
+        p.weak_along_max_chi2,
+    )
+    assert got is applied_across_only
+    assert _weaker_than_filter(fit_sigma_m, along_m, tangent, None, 5.0, 13.8) is False
