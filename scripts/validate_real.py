@@ -45,6 +45,7 @@ from estimator.evaluation.document import results_document  # noqa: E402
 from estimator.evaluation.metrics import method_metrics  # noqa: E402
 from estimator.io import load_log  # noqa: E402
 from estimator.io.routebuild import moving_average, route_from_gnss  # noqa: E402
+from estimator.io.topics import TopicChoice  # noqa: E402
 from estimator.log import Log, TruthData  # noqa: E402
 from estimator.params import Params, load_params, with_values  # noqa: E402
 from estimator.pipeline import Inputs, open_inputs, run  # noqa: E402
@@ -485,6 +486,16 @@ def husky(data: Path, work: Path, results: dict[str, Any]) -> dict[str, Any]:
     results["husky_vs_held_out_fixes"] = [d for _, d in cases]
     results["husky_vs_full_gnss_solution"] = [d for _, d in cases_sol]
 
+    # the same outages with the wheel speed left out (an IMU-only log, issue 17)
+    no_wheel = open_inputs(log_path, route_path, topics=TopicChoice(no_wheel=True))
+    cases_nw, warnings_nw = [], {}
+    for o in HUSKY_OUTAGES:
+        outs = [(o.start, min(o.end, end + 1))]
+        runs = run_methods(no_wheel, config, outs, methods=("baseline", "proposed"))
+        cases_nw.append((o, document(log_path, route_path, no_wheel, runs, outs, fixes)))
+        warnings_nw[o] = runs["proposed"].warnings
+    results["husky_no_wheel_vs_held_out_fixes"] = [d for _, d in cases_nw]
+
     # defaults against the config (mean over the outages; held-out fixes)
     variants = [
         ("defaults, no config (IMU not rotated)", Params()),
@@ -556,6 +567,8 @@ def husky(data: Path, work: Path, results: dict[str, Any]) -> dict[str, Any]:
         "duration": end,
         "cases": cases,
         "cases_sol": cases_sol,
+        "cases_nw": cases_nw,
+        "warnings_nw": warnings_nw,
         "var_table": var_table,
         "ref_rmse": m_ref.truth.rmse_h_err_m if m_ref.truth else None,
         "ref_max": m_ref.truth.max_h_err_m if m_ref.truth else None,
@@ -691,6 +704,45 @@ def samples(results: dict[str, Any]) -> tuple[str, str]:
 
 # ---------------------------------------------------------------------------------------------
 # the document
+
+
+def _no_wheel_summary(h: dict[str, Any]) -> str:
+    """What the IMU-only table shows, from its own figures."""
+    end = h["duration"]
+    quiet = [o for o, d in h["cases_nw"] if d["matches_by_method"]["proposed"]["attempted"] == 0]
+    short_approach = [
+        o for o in quiet if any("trigger.min_approach_m" in w for w in h["warnings_nw"][o])
+    ]
+
+    def rmse(d: dict[str, Any], m: str) -> float:
+        return float(d["methods"][m]["truth"]["rmse_h_err_m"])
+
+    worse = [
+        f"{o.label(end)} ({rmse(d, 'proposed'):.2f} against {rmse(d, 'baseline'):.2f} m)"
+        for o, d in h["cases_nw"]
+        if rmse(d, "proposed") > rmse(d, "baseline") + 0.2
+    ]
+    lines = [
+        f"- {len(quiet)} of {len(h['cases_nw'])} outages make no attempt; {len(short_approach)} of "
+        "them say why in a warning: the robot drives under `trigger.min_approach_m` (100 m "
+        "without wheel speed) with GNSS before them, too little to calibrate the heading and "
+        "the accelerometer, so the outage is dead-reckoned."
+    ]
+    if worse:
+        lines.append(
+            "- Worse than dead reckoning by more than 0.2 m: "
+            + ", ".join(worse)
+            + ". Traced at 2593598 on 200-320 s: the first two accepted matches (210 and"
+            " 212 s, along-track sigmas of 60 and 40 m) put the pseudo-position 8-9 m from the"
+            " fixes where dead reckoning was 3-5 m off, and the outage ends 23 m off with a"
+            " claimed 1-sigma of 7.7 m. The route is the robot's own GNSS on 25 m vertices,"
+            " which cuts the lot's corners by metres, and without an odometer where the window"
+            " lies along it is known to tens of metres. Issue 17's"
+            " IMU-only target (never worse than dead reckoning) is not met here."
+        )
+    else:
+        lines.append("- No outage is worse than dead reckoning by more than 0.2 m.")
+    return "\n".join(lines)
 
 
 def write_doc(
@@ -879,6 +931,13 @@ Against the held-out fixes:
 Against the full-GNSS solution (truth columns only differ):
 
 {outage_table(h["cases_sol"], h["duration"], truth_title="solution")}
+
+Without the wheel speed (`--no-wheel`: IMU, GNSS and the non-holonomic constraint), against
+the held-out fixes:
+
+{outage_table(h["cases_nw"], h["duration"], truth_title="fixes", methods=("baseline", "proposed"))}
+
+{_no_wheel_summary(h)}
 
 What the method does here:
 
