@@ -12,7 +12,8 @@ import pytest
 from estimator.evaluation.metrics import match_summary, method_metrics
 from estimator.io import load_log
 from estimator.io.routebuild import route_from_gnss
-from estimator.params import Params, load_params
+from estimator.io.topics import TopicChoice
+from estimator.params import Params, load_params, with_values
 from estimator.pipeline import run
 from estimator.pipeline.inputs import open_inputs
 
@@ -106,6 +107,20 @@ def test_husky_with_its_config_runs_level_and_matches_its_derived_route(tmp_path
     assert np.median(np.abs(np.degrees(unrotated.epochs.attitude[:, 0]))) > 45
 
 
+def _held_out_fixes(inputs, outage: tuple[float, float]) -> tuple[np.ndarray, np.ndarray]:
+    """The times and E/N positions of the valid fixes the outage removed."""
+    g = inputs.log.gnss
+    t0 = inputs.log.t_start
+    inside = g.valid & (g.t >= t0 + outage[0]) & (g.t <= t0 + outage[1])
+    return g.t[inside], inputs.frame.to_enu(g.lat[inside], g.lon[inside], g.alt[inside])[:, :2]
+
+
+def _rmse_to(fixes: tuple[np.ndarray, np.ndarray], r) -> float:
+    t, xy = fixes
+    est = np.column_stack([np.interp(t, r.epochs.t, r.epochs.position[:, k]) for k in (0, 1)])
+    return float(np.sqrt(np.mean(np.sum((est - xy) ** 2, axis=1))))
+
+
 @needs_husky
 def test_husky_long_outage_beats_dead_reckoning_against_its_held_out_fixes(tmp_path):
     """The lot's windows often pair with another stretch of its line, 25 m off along it at a
@@ -124,19 +139,41 @@ def test_husky_long_outage_beats_dead_reckoning_against_its_held_out_fixes(tmp_p
         m: run(inputs.log, inputs.route, params, method=m, frame=inputs.frame, outages=[outage])
         for m in ("baseline", "proposed")
     }
-    g = inputs.log.gnss
-    t0 = inputs.log.t_start
-    inside = g.valid & (g.t >= t0 + outage[0]) & (g.t <= t0 + outage[1])
-    fixes = inputs.frame.to_enu(g.lat[inside], g.lon[inside], g.alt[inside])[:, :2]
-
-    def rmse(r) -> float:
-        est = np.column_stack(
-            [np.interp(g.t[inside], r.epochs.t, r.epochs.position[:, k]) for k in (0, 1)]
-        )
-        return float(np.sqrt(np.mean(np.sum((est - fixes) ** 2, axis=1))))
-
+    fixes = _held_out_fixes(inputs, outage)
     proposed = runs["proposed"]
     assert match_summary(proposed)["accepted"] > 20
     refused_by = {d.gate.value for m in proposed.matches for d in m.gates if not d.passed}
     assert "dr_separation" not in refused_by
-    assert rmse(proposed) < 0.5 * rmse(runs["baseline"])
+    assert _rmse_to(fixes, proposed) < 0.5 * _rmse_to(fixes, runs["baseline"])
+
+
+@needs_husky
+def test_husky_without_wheel_speed_wants_the_default_pseudo_sigma(tmp_path):
+    """The config's fixed 1 m pseudo-position sigma was chosen with the wheel speed; without
+    it the 200-320 s outage is worse than dead reckoning with that sigma and better with the
+    default (the config's comment and docs/validation.md say so)."""
+    log = load_log(HUSKY)
+    route_path = tmp_path / "husky.route.geojson"
+    route_path.write_text(json.dumps(route_from_gnss(log, name="husky")), encoding="utf-8")
+    inputs = open_inputs(HUSKY, route_path, topics=TopicChoice(no_wheel=True))
+    config = load_params(CONFIGS / "husky_test1.toml")
+    default = Params().pseudo
+    loose = with_values(
+        config,
+        {
+            "pseudo.cross_sigma_m": default.cross_sigma_m,
+            "pseudo.cross_residual_factor": default.cross_residual_factor,
+        },
+    )
+    outage = (200.0, 320.0)
+    fixes = _held_out_fixes(inputs, outage)
+
+    def rmse(params: Params, method: str) -> float:
+        r = run(
+            inputs.log, inputs.route, params, method=method, frame=inputs.frame, outages=[outage]
+        )
+        return _rmse_to(fixes, r)
+
+    baseline = rmse(config, "baseline")
+    assert rmse(config, "proposed") > baseline + 0.2
+    assert rmse(loose, "proposed") < baseline
