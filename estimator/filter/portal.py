@@ -5,7 +5,9 @@ accepted some of them enters the tunnel from a corrupted position it then carrie
 whole outage. So the state ``noise.gnss_rerun_lag_s`` before the gap is saved, the fixes since
 then are tested against where the filter would have dead-reckoned without them
 (:func:`disagreeing_fixes`), and if any disagrees the last seconds are processed again from the
-saved state without those fixes."""
+saved state without those fixes. The state saved is at least the lag after the filter's last
+alignment (``extensions.portal_rerun_after_alignment``): before that its velocity and heading
+are still the alignment's guess, and dead reckoning from them disagrees with good fixes."""
 
 from __future__ import annotations
 
@@ -52,7 +54,13 @@ def advance_to_outage(filt: Filter, t_a: float, p: Params) -> list[float]:
     if not (p.extensions.portal_rerun and lag > 0):
         filt.advance(t_a)
         return []
-    filt.advance(t_a - lag)
+    t_save = t_a - lag
+    if p.extensions.portal_rerun_after_alignment:
+        t_save = max(t_save, last_alignment(filt, t_a) + lag)
+    if t_save >= t_a:
+        filt.advance(t_a)
+        return []
+    filt.advance(t_save)
     saved = filt.snapshot()
     filt.advance(t_a)
     inp = filt.inp
@@ -69,6 +77,12 @@ def advance_to_outage(filt: Filter, t_a: float, p: Params) -> list[float]:
     # every fix up to t_a is behind the filter, in the log's own indexing as well
     filt.idx[I_GNSS] = g1
     return [float(inp.gnss_t[g]) for g in drop]
+
+
+def last_alignment(filt: Filter, t: float) -> float:
+    """The time of the filter's last alignment up to ``t``: its start, or a fresh alignment
+    after an IMU gap."""
+    return max([filt.t_first, *(r.t for r in filt.inp.realignments if r.t <= t)])
 
 
 def _dead_reckoned_rows(saved: FilterState, t_stop: float, inp: FilterInputs) -> F64 | None:

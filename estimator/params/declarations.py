@@ -579,6 +579,14 @@ class ExtensionParams:
         "when GNSS drops out, re-process the last noise.gnss_rerun_lag_s without the fixes "
         "that disagree with dead reckoning (fixed-lag re-run from a saved state)",
     )
+    portal_rerun_after_alignment: bool = param(
+        True,
+        "the portal re-run keeps noise.gnss_rerun_lag_s between an alignment (the start, or "
+        "after an IMU gap) and the state it saves: a filter still calibrating its velocity "
+        "and heading dead-reckons away from every good fix (comma2k19 without wheel speed, "
+        "an outage 10 s after the start: every fix from 3.8 s dropped, the filter 17 m off "
+        "as the outage began)",
+    )
     wheel_scale_state: bool = param(True, "estimate the wheel-speed scale factor as a state")
     gyro_scale_consider: bool = param(
         True,
