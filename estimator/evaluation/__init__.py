@@ -8,6 +8,7 @@ from estimator.evaluation.metrics import (
     map_bias_notes,
     match_summary,
     method_metrics,
+    portal_notes,
 )
 
 __all__ = [
@@ -18,5 +19,6 @@ __all__ = [
     "map_bias_notes",
     "match_summary",
     "method_metrics",
+    "portal_notes",
     "results_document",
 ]

@@ -422,6 +422,28 @@ def map_bias_notes(run: Run) -> list[str]:
     return notes
 
 
+def portal_notes(run: Run) -> list[str]:
+    """One line per GNSS-degraded interval before which the portal's fixed-lag re-run left
+    fixes out (``extensions.portal_rerun``): a filter that enters an outage from a place its
+    last fixes do not show must say which fixes it did not believe."""
+    if not run.dropped_fix_times:
+        return []
+    dropped = np.asarray(run.dropped_fix_times, np.float64)
+    lag = run.params.noise.gnss_rerun_lag_s
+    notes = []
+    for a, _ in run.degraded_intervals:
+        here = dropped[(dropped >= a - lag - 1.0) & (dropped <= a)]
+        if len(here) == 0:
+            continue
+        fixes = "1 fix" if len(here) == 1 else f"{len(here)} fixes"
+        notes.append(
+            f"portal re-run before the outage at {a - run.t0:.1f} s: {fixes} of "
+            f"{here.min() - run.t0:.1f}-{here.max() - run.t0:.1f} s left out (they disagreed "
+            "with dead reckoning)"
+        )
+    return notes
+
+
 _ROUTE_COLUMNS = (
     ("max_pos_dev_m", "Max pos. dev. [m]"),
     ("mean_pos_dev_m", "Mean pos. dev. [m]"),

@@ -376,3 +376,23 @@ def test_a_map_bias_the_run_applied_is_said_and_a_right_route_is_taken_as_right(
     assert left > 10.0
     used = [m.map_bias for m in aside_run.matches if m.map_bias is not None]
     assert used and all(b.refused == "too large" and not b.applied for b in used)
+
+
+def test_portal_notes_name_the_fixes_the_re_run_left_out():
+    """One line per outage before which the portal re-run left fixes out, with their count
+    and span; fixes dropped elsewhere (more than the lag and a second before an outage) and
+    outages without any are not mentioned."""
+    from estimator.evaluation import portal_notes
+
+    a = OUTAGE[0]
+    lag = Params().noise.gnss_rerun_lag_s
+    dropped = (a - lag - 5.0, a - 6.5, a - 6.4, a - 2.0)
+    run = replace(make_run(0.0, 0.0), dropped_fix_times=dropped)
+    (note,) = portal_notes(run)
+    assert note == (
+        f"portal re-run before the outage at {a - T0:.1f} s: 3 fixes of "
+        f"{a - 6.5 - T0:.1f}-{a - 2.0 - T0:.1f} s left out (they disagreed with dead reckoning)"
+    )
+    (one,) = portal_notes(replace(run, dropped_fix_times=(a - 1.0,)))
+    assert ": 1 fix of " in one
+    assert portal_notes(make_run(0.0, 0.0)) == []

@@ -84,7 +84,10 @@ def test_the_status_line_lists_the_logs_warnings_escaped_and_bounded():
         outages=(),
         off_route=None,
         proposed=SimpleNamespace(
-            warnings=("wheel speed looks like km/h",), degraded_intervals=(), matches=()
+            warnings=("wheel speed looks like km/h",),
+            degraded_intervals=(),
+            matches=(),
+            dropped_fix_times=(),
         ),
     )
     line = status_markdown(session)  # type: ignore[arg-type]
