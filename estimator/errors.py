@@ -6,7 +6,7 @@ from pathlib import Path
 
 
 class RoutefuseError(Exception):
-    """Base class: an error the CLI prints as one line and exits 2 on, and the UI notifies."""
+    """Base class: an error the CLI prints as one line and exits 3 on, and the UI notifies."""
 
     def __init__(self, source: str | Path | None, problem: str) -> None:
         self.source = None if source is None else str(source)
