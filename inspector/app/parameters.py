@@ -29,6 +29,11 @@ GROUP_TITLES = {
     "sensors": "sensors",
     "general": "general",
 }
+TYPED_DECIMALS = 10
+"""decimals a float parameter's box keeps as typed: viser gives a box the decimals of its step
+(one for a 0.5 step) and the browser's number box drops every digit typed past them, so 0.33
+became 0.3 without a word; the bounds still clamp, the step still drives the slider and the
+arrows"""
 OUTAGE_LABEL = "GNSS outages (s)"
 OUTAGE_EDIT_QUIET_S = 1.0
 """the outage field applies its text once typing has rested this long: viser sends every
@@ -45,18 +50,28 @@ def param_widget(gui: viser.GuiApi, spec: ParamSpec, value: Any) -> viser.GuiInp
     if spec.choices:
         return gui.add_dropdown(label, spec.choices, initial_value=value, hint=hint)
     if str(spec.type).startswith("tuple"):
-        return gui.add_vector3(label, tuple(value), step=0.01, hint=hint)
+        vector = gui.add_vector3(label, tuple(value), step=0.01, hint=hint)
+        vector.precision = TYPED_DECIMALS
+        return vector
     if spec.type in (int, float) and spec.lo is not None and spec.hi is not None:
         step = spec.step or (1 if spec.type is int else (spec.hi - spec.lo) / 100)
-        if (spec.hi - spec.lo) / step <= 2000:
-            if spec.type is int:
+        if spec.type is int:
+            if (spec.hi - spec.lo) / step <= 2000:
                 return gui.add_slider(
                     label, int(spec.lo), int(spec.hi), int(step), int(value), hint=hint
                 )
-            return gui.add_slider(
+            return gui.add_number(label, value, min=spec.lo, max=spec.hi, step=step, hint=hint)
+        number: viser.GuiSliderHandle[float] | viser.GuiNumberHandle[float]
+        if (spec.hi - spec.lo) / step <= 2000:
+            number = gui.add_slider(
                 label, float(spec.lo), float(spec.hi), float(step), float(value), hint=hint
             )
-        return gui.add_number(label, value, min=spec.lo, max=spec.hi, step=step, hint=hint)
+        else:
+            number = gui.add_number(
+                label, float(value), min=spec.lo, max=spec.hi, step=step, hint=hint
+            )
+        number.precision = TYPED_DECIMALS
+        return number
     return gui.add_text(label, "" if value is None else str(value), hint=hint)
 
 
