@@ -1,6 +1,7 @@
 """Numbers typed into the Parameters tab in headless Chromium, key by key as a person types
 them: a value within the bounds reaches the estimator as typed, whatever the control's step
-(the box used to keep only the step's decimals: 12.33 in a 0.5-step box became 12.3)."""
+(the box used to keep only the step's decimals: 12.33 in a 0.5-step box became 12.3), and
+typing through a value below the minimum (0 on the way to 0.0125) is not broken into."""
 
 from __future__ import annotations
 
@@ -41,6 +42,8 @@ def _type(page, label: str, text: str) -> None:
     [
         ("gates", "gates.max_correction_m", "12.33", 12.33),  # a slider, step 0.5
         ("noise", "noise.gyro_bias_tau_s", "1234.5", 1234.5),  # a number box, step 10
+        # through 0, below the minimum 0.001: refused only if the typing rests there
+        ("noise", "noise.gyro_arw_deg_sqrt_h", "0.0125", 0.0125),
     ],
 )
 def test_a_typed_number_within_bounds_is_kept_as_typed(
@@ -60,4 +63,6 @@ def test_a_typed_number_within_bounds_is_kept_as_typed(
             lambda: f"{name} = {expected} (have {get_param(controller.params, name)})",
         )
         assert _box(page, label).input_value() == typed
+        page.wait_for_timeout(1500)  # past the typing rest: nothing reported
+        assert "Error" not in page.inner_text("body")
         page.close()
