@@ -2,11 +2,14 @@
 
 from __future__ import annotations
 
+from collections.abc import Iterator
+from contextlib import contextmanager
+from dataclasses import dataclass
 from pathlib import Path
 
 
 class RoutefuseError(Exception):
-    """Base class: an error the CLI prints as one line and exits 2 on, and the UI notifies."""
+    """Base class: an error the CLI prints as one line and exits 3 on, and the UI notifies."""
 
     def __init__(self, source: str | Path | None, problem: str) -> None:
         self.source = None if source is None else str(source)
@@ -26,15 +29,52 @@ class ConfigError(RoutefuseError):
     """A parameter file or a parameter value that is invalid."""
 
 
-CHOOSE_LINE_BY_FLAG = "with --route-feature NAME_OR_INDEX"
-"""Where a command-line user chooses the line of a route file holding several."""
+@dataclass(frozen=True)
+class WhereToChoose:
+    """Where the user chooses among what a file holds several of, as the end of a
+    :class:`ChoiceError`'s message says it (``...; choose one <where>``): the command line's
+    flags by default; a caller with controls of its own (the inspector) names them."""
+
+    route_line: str = "with --route-feature NAME_OR_INDEX"
+    topic: str = "with --{kind}-topic TOPIC"
+    """a template: ``{kind}`` is imu, gnss, wheel or truth"""
 
 
-class RouteLineError(RouteError):
+ON_THE_COMMAND_LINE = WhereToChoose()
+
+
+class ChoiceError(RoutefuseError):
+    """A file holding several of something (a route file's lines, a log's topics of a kind)
+    opened without choosing one, or with a choice naming none of them. It is raised where the
+    file is read, saying where to choose on the command line; a caller with other controls
+    says its own with :meth:`choose`. The message is the problem, where to choose, then
+    ``listing`` (last: a notification cut short loses the listing, not the way out)."""
+
+    def __init__(
+        self,
+        source: str | Path | None,
+        problem: str,
+        *,
+        where: WhereToChoose = ON_THE_COMMAND_LINE,
+        listing: str = "",
+    ) -> None:
+        self.bare_problem = problem
+        self.where = where
+        self.listing = listing
+        super().__init__(source, f"{problem}; choose one {self.way(where)}{listing}")
+
+    def way(self, where: WhereToChoose) -> str:
+        """Where to choose this error's kind of thing."""
+        raise NotImplementedError
+
+    def choose(self, where: WhereToChoose) -> ChoiceError:
+        """The same error, saying where to choose as ``where`` does."""
+        raise NotImplementedError
+
+
+class RouteLineError(RouteError, ChoiceError):
     """A route file holding several lines opened without choosing one, or with a choice that
-    names none of them. ``lines`` are the file's line names (in order); the message ends with
-    where to choose one, ``how`` (the command line's flag unless the caller, such as the
-    inspector, names its own control)."""
+    names none of them. ``lines`` are the file's line names (in order)."""
 
     def __init__(
         self,
@@ -42,24 +82,22 @@ class RouteLineError(RouteError):
         problem: str,
         *,
         lines: tuple[str, ...],
-        how: str = CHOOSE_LINE_BY_FLAG,
+        where: WhereToChoose = ON_THE_COMMAND_LINE,
     ) -> None:
         self.lines = lines
-        super().__init__(source, f"{problem}; choose one {how}")
+        super().__init__(source, problem, where=where)
+
+    def way(self, where: WhereToChoose) -> str:
+        return where.route_line
+
+    def choose(self, where: WhereToChoose) -> RouteLineError:
+        return RouteLineError(self.source, self.bare_problem, lines=self.lines, where=where)
 
 
-CHOOSE_TOPIC_BY_FLAG = "with --{kind}-topic TOPIC"
-"""Where a command-line user chooses the topic of a kind (``{kind}``: imu, gnss, wheel, truth)
-that a log holds several of."""
-
-
-class TopicError(LogError):
+class TopicError(LogError, ChoiceError):
     """A log holding several topics of a kind (``kind``: imu, gnss, wheel, truth) opened
-    without choosing one. ``found`` are the candidates; the message says where to choose one,
-    ``how`` (the command line's flag unless the caller, such as the inspector, names its own
-    way), as :class:`RouteLineError` does for a route file's lines, and then lists every topic
-    of the log, ``topics`` (last: a notification cut short loses the listing, not the way
-    out)."""
+    without choosing one. ``found`` are the candidates; the message lists every topic of the
+    log, ``topics``, after where to choose."""
 
     def __init__(
         self,
@@ -69,22 +107,34 @@ class TopicError(LogError):
         kind: str,
         found: tuple[str, ...],
         topics: str = "",
-        how: str = CHOOSE_TOPIC_BY_FLAG,
+        where: WhereToChoose = ON_THE_COMMAND_LINE,
     ) -> None:
         self.kind = kind
         self.found = found
         self.topics = topics
-        self.bare_problem = problem
         listing = f" (topics: {topics})" if topics else ""
-        super().__init__(source, f"{problem}; choose one {how.format(kind=kind)}{listing}")
+        super().__init__(source, problem, where=where, listing=listing)
 
-    def choose(self, how: str) -> TopicError:
-        """The same error, saying ``how`` to choose one instead."""
+    def way(self, where: WhereToChoose) -> str:
+        return where.topic.format(kind=self.kind)
+
+    def choose(self, where: WhereToChoose) -> TopicError:
         return TopicError(
             self.source,
             self.bare_problem,
             kind=self.kind,
             found=self.found,
             topics=self.topics,
-            how=how,
+            where=where,
         )
+
+
+@contextmanager
+def choices_said(where: WhereToChoose) -> Iterator[None]:
+    """A :class:`ChoiceError` raised inside says where to choose as ``where`` does."""
+    try:
+        yield
+    except ChoiceError as exc:
+        if where == ON_THE_COMMAND_LINE:
+            raise
+        raise exc.choose(where) from None

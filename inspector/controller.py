@@ -19,7 +19,7 @@ from typing import TYPE_CHECKING, Any, Protocol
 
 import numpy as np
 
-from estimator.errors import RoutefuseError
+from estimator.errors import RoutefuseError, WhereToChoose
 from estimator.io.topics import AUTO_TOPICS, TopicChoice
 from estimator.params import Params
 from estimator.results import Run
@@ -216,11 +216,12 @@ class StageProgress(Protocol):
 
 ROUTE_LINE_FIELD = "route line"
 """the Files tab's control that chooses the line of a route file holding several"""
-CHOOSE_LINE_IN_FILES_TAB = f"under '{ROUTE_LINE_FIELD}' in the Files tab, then press 'open'"
-"""where a browser user chooses it: the end of the message for a file opened without a line"""
-CHOOSE_TOPIC_AT_SERVE_START = "by restarting 'routefuse serve' with --{kind}-topic TOPIC"
-"""where a browser user chooses the topic of a log holding several of a kind (the topics are
-chosen for the whole server, on its command line)"""
+IN_THE_INSPECTOR = WhereToChoose(
+    route_line=f"under '{ROUTE_LINE_FIELD}' in the Files tab, then press 'open'",
+    topic="by restarting 'routefuse serve' with --{kind}-topic TOPIC",
+)
+"""where a browser user chooses a route file's line (the Files tab) and a log's topic (the
+topics are chosen for the whole server, on its command line)"""
 MAX_FEATURE_CHARS = 200
 """a line name longer than this is not a line name (a browser may send anything)"""
 
@@ -241,8 +242,7 @@ def _default_open(
         route_path,
         topics=topics,
         route_feature=route_feature,
-        route_feature_how=CHOOSE_LINE_IN_FILES_TAB,
-        topics_how=CHOOSE_TOPIC_AT_SERVE_START,
+        where_to_choose=IN_THE_INSPECTOR,
         progress=progress,
     )
 

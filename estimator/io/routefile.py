@@ -22,7 +22,7 @@ from typing import Any
 import numpy as np
 from numpy.typing import NDArray
 
-from estimator.errors import CHOOSE_LINE_BY_FLAG, RouteError, RouteLineError
+from estimator.errors import RouteError, RouteLineError
 from estimator.io.routeformats import ROUTE_SUFFIXES_TEXT, route_format
 from estimator.nav.frames import LocalFrame
 from estimator.route import Route
@@ -59,14 +59,12 @@ class _Candidate:
     points: list[tuple[float, float, float]]
 
 
-def read_route_file(
-    path: str | Path, *, feature: str | int | None = None, how: str = CHOOSE_LINE_BY_FLAG
-) -> RouteLine:
+def read_route_file(path: str | Path, *, feature: str | int | None = None) -> RouteLine:
     """The route polyline of a file. With several lines in the file (features, tracks,
     placemarks), ``feature`` picks one by name or index (:func:`choose_line`); without it
-    that is an error listing them and saying ``how`` to choose one."""
+    that is a :class:`RouteLineError` listing them."""
     p = Path(path)
-    return _to_line(p, _choose(p, _candidates(p), feature, how))
+    return _to_line(p, _choose(p, _candidates(p), feature))
 
 
 def read_route_lines(path: str | Path) -> tuple[RouteLine, ...]:
@@ -170,28 +168,21 @@ def _read_text(p: Path) -> str:
     return text
 
 
-def _choose(
-    p: Path, cands: list[_Candidate], feature: str | int | None, how: str = CHOOSE_LINE_BY_FLAG
-) -> _Candidate:
+def _choose(p: Path, cands: list[_Candidate], feature: str | int | None) -> _Candidate:
     if not cands:
         raise RouteError(p, "no line geometry found (need a LineString, track or route)")
-    return cands[choose_line(p, tuple(c.name for c in cands), feature, how=how)]
+    return cands[choose_line(p, tuple(c.name for c in cands), feature)]
 
 
-def choose_line(
-    path: str | Path,
-    names: tuple[str, ...],
-    feature: str | int | None,
-    *,
-    how: str = CHOOSE_LINE_BY_FLAG,
-) -> int:
+def choose_line(path: str | Path, names: tuple[str, ...], feature: str | int | None) -> int:
     """The index of the line ``feature`` picks among a route file's lines ``names``: an ``int``
     is an index; text is a name, else an index (``--route-feature``'s NAME_OR_INDEX). Without
     ``feature`` the only line; with several, or a ``feature`` naming none, a one-line
-    :class:`RouteLineError` listing them and saying ``how`` to choose one."""
+    :class:`RouteLineError` listing them (saying where to choose on the command line: a caller
+    with other controls re-words it, :meth:`RouteLineError.choose`)."""
     if feature is None:
         if len(names) > 1:
-            raise RouteLineError(path, f"the file has {_listing(names)}", lines=names, how=how)
+            raise RouteLineError(path, f"the file has {_listing(names)}", lines=names)
         return 0
     if isinstance(feature, int):
         if -len(names) <= feature < len(names):
@@ -200,7 +191,6 @@ def choose_line(
             path,
             f"no line numbered {feature}; the file has {_listing(names)}",
             lines=names,
-            how=how,
         )
     key = str(feature).strip()
     by_name = [i for i, name in enumerate(names) if name == key]
@@ -214,7 +204,6 @@ def choose_line(
         f"{what} line feature{'s' if by_name else ''} named or numbered {_short(key)!r}; "
         f"the file has {_listing(names)}",
         lines=names,
-        how=how,
     )
 
 

@@ -11,11 +11,11 @@ import pyproj
 from numpy.typing import NDArray
 
 from estimator.errors import (
-    CHOOSE_LINE_BY_FLAG,
-    CHOOSE_TOPIC_BY_FLAG,
+    ON_THE_COMMAND_LINE,
     LogError,
     RouteError,
-    TopicError,
+    WhereToChoose,
+    choices_said,
 )
 from estimator.io import AUTO_TOPICS, TopicChoice, load_log
 from estimator.io.routefile import RouteLine, read_route_file, route_in_frame
@@ -99,28 +99,23 @@ def open_inputs(
     *,
     topics: TopicChoice = AUTO_TOPICS,
     route_feature: str | int | None = None,
-    route_feature_how: str = CHOOSE_LINE_BY_FLAG,
-    topics_how: str = CHOOSE_TOPIC_BY_FLAG,
+    where_to_choose: WhereToChoose = ON_THE_COMMAND_LINE,
     cache_dir: Path | None = None,
     progress: Callable[[float], None] | None = None,
 ) -> Inputs:
     """Load the log, place the frame at its first fix, load the route in that frame, and refuse
     a route that is nowhere near the log (a wrong file pairing). ``route_feature`` picks the
-    line of a route file holding several; ``route_feature_how`` is where the user chooses it,
-    named when none (or no such line) is chosen (the command line's flag by default);
-    ``topics_how`` likewise where a log's topic is chosen among several of a kind (a template
-    with ``{kind}``: imu, gnss, wheel, truth)."""
+    line of a route file holding several; a log of several topics of a kind, or a route file of
+    several lines, opened without a choice is a :class:`ChoiceError` saying where the user
+    chooses, ``where_to_choose`` (the command line's flags by default)."""
     log_progress = None if progress is None else (lambda f: progress(0.95 * f))
-    try:
+    with choices_said(where_to_choose):
         log = load_log(log_path, topics=topics, cache_dir=cache_dir, progress=log_progress)
-    except TopicError as exc:
-        if topics_how == CHOOSE_TOPIC_BY_FLAG:
-            raise
-        raise exc.choose(topics_how) from None
     frame = frame_of(log)
     route = None
     if route_path is not None:
-        line = read_route_file(route_path, feature=route_feature, how=route_feature_how)
+        with choices_said(where_to_choose):
+            line = read_route_file(route_path, feature=route_feature)
         route = route_in_frame(line, frame)
         dist = route_distances(log, route, frame, max_points=500)
         if len(dist) and dist.min() > MAX_ROUTE_DISTANCE_M:

@@ -12,7 +12,7 @@ from viser import _messages
 from estimator.errors import RoutefuseError, RouteLineError
 from estimator.io import LOG_SUFFIXES_TEXT, ROUTE_SUFFIXES_TEXT
 from estimator.io.routefile import choose_line, line_label
-from inspector.app.widgets import Event, markdown_text, show_value
+from inspector.app.widgets import Event, markdown_text, show_value, wrapping_anywhere
 from inspector.controller import (
     ROUTE_LINE_FIELD,
     Kind,
@@ -55,9 +55,14 @@ def _transfers(*guis: viser.GuiApi) -> list[tuple[str, dict[str, Any]]]:
     return [item for states in seen.values() for item in list(states.items())]
 
 
+PATH_STYLE = "; font-size: 0.85em; opacity: 0.75"
+"""the full path's line beneath a file's name: smaller and paler than the name"""
+
+
 def loaded_markdown(session: Session) -> str:
-    """What is loaded: each file's name and full path (and the route's line, when one was
-    chosen among several), escaped."""
+    """What is loaded: each file's name (and the route's line, when one was chosen among
+    several) and, on a smaller line beneath it, its full path, all wrapping within the panel
+    however long; escaped."""
     line = ""
     feature = session.route_feature
     if feature is not None:
@@ -66,10 +71,17 @@ def loaded_markdown(session: Session) -> str:
         shown = line_label(feature, name) if isinstance(feature, int) else name
         line = f" · line **{markdown_text(shown)}**"
     return (
-        f"**Loaded:** log **{markdown_text(session.log_name)}** "
-        f"({markdown_text(str(session.log_path))}) · route "
-        f"**{markdown_text(session.route_name)}** ({markdown_text(str(session.route_path))})"
-        f"{line}"
+        "**Loaded:**\n\n"
+        f"- log {_file_markdown(session.log_name, session.log_path)}\n"
+        f"- route {_file_markdown(session.route_name, session.route_path, line)}"
+    )
+
+
+def _file_markdown(name: str, path: object, after: str = "") -> str:
+    return (
+        wrapping_anywhere(f"**{markdown_text(name)}**{after}")
+        + "<br>"
+        + wrapping_anywhere(markdown_text(str(path)), style=PATH_STYLE)
     )
 
 

@@ -29,6 +29,16 @@ GROUP_TITLES = {
     "sensors": "sensors",
     "general": "general",
 }
+TYPED_DECIMALS = 10
+"""decimals a float parameter's box keeps as typed: viser gives a box the decimals of its step
+(one for a 0.5 step) and the browser's number box drops every digit typed past them, so 0.33
+became 0.3 without a word; the bounds still clamp, the step still drives the slider and the
+arrows"""
+TYPING_REST_S = 1.0
+"""a refused parameter value is reported, and its control shows the value in effect again, only
+once the control has rested this long: typing 0.0125 into a box whose minimum is 0.001 passes
+through 0, and putting the old value back then broke into what the person was typing; a value
+that is accepted within the rest cancels the report"""
 OUTAGE_LABEL = "GNSS outages (s)"
 OUTAGE_EDIT_QUIET_S = 1.0
 """the outage field applies its text once typing has rested this long: viser sends every
@@ -45,18 +55,28 @@ def param_widget(gui: viser.GuiApi, spec: ParamSpec, value: Any) -> viser.GuiInp
     if spec.choices:
         return gui.add_dropdown(label, spec.choices, initial_value=value, hint=hint)
     if str(spec.type).startswith("tuple"):
-        return gui.add_vector3(label, tuple(value), step=0.01, hint=hint)
+        vector = gui.add_vector3(label, tuple(value), step=0.01, hint=hint)
+        vector.precision = TYPED_DECIMALS
+        return vector
     if spec.type in (int, float) and spec.lo is not None and spec.hi is not None:
         step = spec.step or (1 if spec.type is int else (spec.hi - spec.lo) / 100)
-        if (spec.hi - spec.lo) / step <= 2000:
-            if spec.type is int:
+        if spec.type is int:
+            if (spec.hi - spec.lo) / step <= 2000:
                 return gui.add_slider(
                     label, int(spec.lo), int(spec.hi), int(step), int(value), hint=hint
                 )
-            return gui.add_slider(
+            return gui.add_number(label, value, min=spec.lo, max=spec.hi, step=step, hint=hint)
+        number: viser.GuiSliderHandle[float] | viser.GuiNumberHandle[float]
+        if (spec.hi - spec.lo) / step <= 2000:
+            number = gui.add_slider(
                 label, float(spec.lo), float(spec.hi), float(step), float(value), hint=hint
             )
-        return gui.add_number(label, value, min=spec.lo, max=spec.hi, step=step, hint=hint)
+        else:
+            number = gui.add_number(
+                label, float(value), min=spec.lo, max=spec.hi, step=step, hint=hint
+            )
+        number.precision = TYPED_DECIMALS
+        return number
     return gui.add_text(label, "" if value is None else str(value), hint=hint)
 
 
@@ -72,6 +92,8 @@ class ParametersPanel:
         self._widgets: dict[str, viser.GuiInputHandle[Any]] = {}
         self._outage_edits = 0
         self._outage_timer: threading.Timer | None = None
+        self._refusals: dict[str, threading.Timer] = {}
+        """per parameter, the report of its refused value waiting for the control to rest"""
         self.method = gui.add_dropdown(
             "method", PROPOSED_METHODS, initial_value=self.controller.method
         )
@@ -113,10 +135,34 @@ class ParametersPanel:
         def set_value(event: Event) -> None:
             if event.client is None:
                 return
-            widget = self._widgets[name]
-            self.view.guard(lambda: self.controller.set_param(name, widget.value))
+            with self._lock:
+                pending = self._refusals.pop(name, None)
+            if pending is not None:
+                pending.cancel()
+            try:
+                self.controller.set_param(name, self._widgets[name].value)
+            except RoutefuseError as exc:
+                self._refuse_when_rested(name, exc)
 
         return set_value
+
+    def _refuse_when_rested(self, name: str, exc: RoutefuseError) -> None:
+        if TYPING_REST_S <= 0:
+            self._refuse(name, exc, None)
+            return
+        timer = threading.Timer(TYPING_REST_S, lambda: self._refuse(name, exc, timer))
+        timer.daemon = True
+        with self._lock:
+            self._refusals[name] = timer
+        timer.start()
+
+    def _refuse(self, name: str, exc: RoutefuseError, timer: threading.Timer | None) -> None:
+        with self._lock:
+            if timer is not None and self._refusals.get(name) is not timer:
+                return  # the control changed since
+            self._refusals.pop(name, None)
+        self.view.notify_error(exc)
+        self.view.sync_params()
 
     def _on_method(self, event: Event) -> None:
         if event.client is None:
@@ -162,9 +208,12 @@ class ParametersPanel:
         )
 
     def sync(self) -> None:
-        """Show the controller's parameters (after another tab changed them, or a failure)."""
+        """Show the controller's parameters (after another tab changed them, or a failure),
+        except in a control whose refused value waits for the typing to rest."""
         params = self.controller.params
         for name, widget in self._widgets.items():
+            if name in self._refusals:
+                continue  # being typed: shown when it rests
             value = get_param(params, name)
             if isinstance(value, tuple):
                 value = tuple(float(v) for v in value)
@@ -194,6 +243,9 @@ class ParametersPanel:
 
     def close(self) -> None:
         with self._lock:
+            for timer in self._refusals.values():
+                timer.cancel()
+            self._refusals.clear()
             if self._outage_timer is not None:
                 self._outage_timer.cancel()
                 self._outage_timer = None

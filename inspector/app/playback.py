@@ -16,7 +16,7 @@ import viser
 from estimator.errors import RoutefuseError
 from estimator.evaluation import map_bias_notes, portal_notes
 from estimator.results import Run
-from inspector.app.widgets import Event, markdown_text, show_value
+from inspector.app.widgets import Event, markdown_text, show_value, wrapping_anywhere
 from inspector.controller import Session, format_outages
 from inspector.timeline import PLAY_SPEEDS, parse_speed
 
@@ -39,7 +39,8 @@ def status_markdown(s: Session) -> str:
     """The status line of a session: files, length, attempts, and the off-route summary."""
     tl = s.timeline
     text = (
-        f"**{markdown_text(s.log_name)}** · route **{markdown_text(s.route_name)}** · "
+        f"{wrapping_anywhere(f'**{markdown_text(s.log_name)}**')} · route "
+        f"{wrapping_anywhere(f'**{markdown_text(s.route_name)}**')} · "
         f"{tl.duration:.0f} s, "
         f"{tl.n_frames} frames, {len(tl.match_t)} match attempts "
         f"({int((~tl.match_accepted).sum())} rejected)"

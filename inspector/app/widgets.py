@@ -28,3 +28,10 @@ def markdown_text(text: object) -> str:
     viser's markdown, which renders raw HTML unsanitised: markdown punctuation backslash-escaped,
     then HTML's special characters as entities (the standard library's ``html.escape``)."""
     return html.escape(_MARKDOWN_PUNCTUATION.sub(r"\\\1", str(text)))
+
+
+def wrapping_anywhere(markdown: str, *, style: str = "") -> str:
+    """``markdown`` (already escaped) in a span whose text may break anywhere: a file name or a
+    path has no space to wrap at and ran off the panel. ``style`` adds CSS of our own, never
+    anything a file or the user chose."""
+    return f'<span style="overflow-wrap: anywhere{style}">{markdown}</span>'

@@ -12,6 +12,7 @@ from pathlib import Path
 from types import ModuleType
 
 from estimator.errors import ConfigError, RoutefuseError
+from inspector.cli.exit_codes import ExitCode
 
 NAME = "bench"
 HELP = (
@@ -102,4 +103,4 @@ def execute(args: argparse.Namespace) -> int:
         print(json.dumps(doc, indent=2))
     else:
         print(harness.format_table(doc))
-    return 1 if any(r["error"] for r in doc["items"]) else 0
+    return ExitCode.SOME_FAILED if any(r["error"] for r in doc["items"]) else ExitCode.OK

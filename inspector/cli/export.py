@@ -10,6 +10,7 @@ from pathlib import Path
 from estimator.errors import ConfigError
 from estimator.io import LOG_FORMATS_TEXT, ROUTE_FORMATS_TEXT, TopicChoice
 from inspector.cli.checks import check_log, check_log_specs, route_for
+from inspector.cli.exit_codes import ExitCode
 from inspector.cli.options import (
     add_outage_option,
     add_param_options,
@@ -205,7 +206,7 @@ def execute(args: argparse.Namespace) -> int:
         )
         print(format_summary(batch.items))
         print(f"summary: {batch.summary_csv}")
-        return 2 if batch.failed else 0
+        return ExitCode.SOME_FAILED if batch.failed else ExitCode.OK
     if args.log is None:
         raise ConfigError(None, "give a LOG (with --route ROUTE) or --batch DIR_OR_GLOB")
     # the log's own problem first, then the route's (given, or the one beside the log as

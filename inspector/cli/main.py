@@ -6,11 +6,13 @@ import argparse
 import importlib
 import os
 import sys
+import textwrap
 from collections.abc import Sequence
 from types import ModuleType
 from typing import NoReturn
 
 from estimator.errors import RoutefuseError
+from inspector.cli.exit_codes import ExitCode, exit_codes_epilog
 
 COMMANDS = (
     "inspector.cli.info",
@@ -60,8 +62,13 @@ class _VersionAction(argparse.Action):
 def build_parser() -> argparse.ArgumentParser:
     parser = argparse.ArgumentParser(
         prog="routefuse",
-        description="Keep a ground vehicle localised through GNSS outages by matching the shape "
-        "of its dead-reckoned track to the mission route, and inspect every match in a browser.",
+        description=textwrap.fill(
+            "Keep a ground vehicle localised through GNSS outages by matching the shape of its "
+            "dead-reckoned track to the mission route, and inspect every match in a browser.",
+            width=78,
+        ),
+        epilog=exit_codes_epilog(),
+        formatter_class=argparse.RawDescriptionHelpFormatter,
     )
     parser.add_argument(
         "--debug", action="store_true", help="show the full traceback on unexpected errors"
@@ -82,7 +89,8 @@ QUICK_EXIT_COMMANDS = frozenset({"run", "info"})
 
 
 def main(argv: Sequence[str] | None = None) -> int:
-    """Run one command; its exit code (2: a one-line error naming the file)."""
+    """Run one command; its exit code (:class:`ExitCode`; a usage error raises argparse's
+    ``SystemExit(2)``)."""
     return _execute(build_parser().parse_args(argv))
 
 
@@ -107,10 +115,10 @@ def _execute(args: argparse.Namespace) -> int:
         return int(args._execute(args) or 0)
     except RoutefuseError as exc:
         print(f"routefuse: error: {exc}", file=sys.stderr)
-        return 2
+        return ExitCode.REFUSED
     except KeyboardInterrupt:
         print("routefuse: interrupted", file=sys.stderr)
-        return 130
+        return ExitCode.INTERRUPTED
     except Exception as exc:
         if args.debug or os.environ.get("ROUTEFUSE_DEBUG"):
             raise
@@ -119,7 +127,7 @@ def _execute(args: argparse.Namespace) -> int:
             "(run with --debug for the traceback)",
             file=sys.stderr,
         )
-        return 1
+        return ExitCode.INTERNAL_ERROR
 
 
 if __name__ == "__main__":

@@ -11,6 +11,7 @@ from typing import Any
 from estimator.errors import ConfigError
 from estimator.io import LOG_FORMATS_TEXT
 from inspector.cli.checks import check_log_specs
+from inspector.cli.exit_codes import ExitCode
 from inspector.cli.options import add_outage_option, add_topic_options, parse_outage
 
 NAME = "sweep"
@@ -161,11 +162,11 @@ def execute(args: argparse.Namespace) -> int:
     print(f"table: {result.parquet} and {result.csv.name}")
     if result.report is not None:
         print(f"report: {result.report}")
-    # the failed tasks are named here too, --quiet or not: a CI log shows what exit 2 means
+    # the failed tasks are named here too, --quiet or not: a CI log shows what exit 4 means
     for line in failures[:MAX_FAILURES_LISTED]:
         print(line)
     if result.failed > MAX_FAILURES_LISTED:
         print(
             f"... and {result.failed - MAX_FAILURES_LISTED} more failed tasks ({result.csv.name})"
         )
-    return 2 if result.failed else 0
+    return ExitCode.SOME_FAILED if result.failed else ExitCode.OK

@@ -158,5 +158,8 @@ class _CallbackProgress:
         self.callback(self.done, self.total, Path(str(row["log"])), stage, 1.0)
         self.done += 1
 
+    def note(self, text: str) -> None:
+        pass
+
     def close(self) -> None:
         pass

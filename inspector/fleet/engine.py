@@ -29,8 +29,10 @@ exception escaped (writing its file failed). Only a task that keeps killing work
 failed row, never the sweep.
 
 Resume. A task whose file holds an ``ok`` row with the same task id is not run again (ids hash
-the log's and route's paths, the outages, topics, method and parameters:
-:func:`inspector.fleet.plan.task_id`); failed tasks are retried on the next run.
+the log's and route's paths, the outages, topics, method, parameters and the client's estimator
+source: :func:`inspector.fleet.plan.task_id`); failed tasks are retried on the next run. On a
+running cluster every worker must run the client's estimator source (:func:`check_workers`
+before any task, and each task again), or its rows would be kept as this code's.
 
 Output folder::
 
@@ -80,6 +82,9 @@ STALE_OUTPUTS = ("results.parquet", "results.csv", "report.html", "summary.csv")
 """what a sweep or a batch export writes once all its tasks are done"""
 CONNECT_TIMEOUT_S = 30.0
 WORKERS_TIMEOUT_S = 60.0
+WAITING_NOTE_S = 10.0
+"""while no worker has joined a running scheduler, a line says so this often: a sweep that
+printed nothing for a minute looked hung"""
 
 
 @dataclass(frozen=True)
@@ -111,6 +116,10 @@ class TaskJob:
     task_file: str
     export_dir: str | None
     replay: ReplayOptions | None
+    estimator_source: str | None = None
+    """the client's :func:`estimator_source`: a worker on other code fails the task rather than
+    write a row under an id that hashes the client's code (a worker that joined after
+    :func:`check_workers`); None: not checked"""
 
 
 @dataclass(frozen=True)
@@ -134,6 +143,9 @@ class SweepProgress(Protocol):
     def start(self, *, total: int, done: int, failed: int, dashboard: str | None) -> None: ...
 
     def advance(self, row: Mapping[str, Any]) -> None: ...
+
+    def note(self, text: str) -> None:
+        """What the sweep waits for before its first task (a scheduler, its workers)."""
 
     def close(self) -> None: ...
 
@@ -177,6 +189,9 @@ class TerminalProgress:
         else:
             print(line, file=self.stream, flush=True)
 
+    def note(self, text: str) -> None:
+        print(text, file=self.stream, flush=True)
+
     def close(self) -> None:
         if self.bar is not None:
             self.bar.close()
@@ -189,6 +204,9 @@ class QuietProgress:
     def advance(self, row: Mapping[str, Any]) -> None:
         pass
 
+    def note(self, text: str) -> None:
+        pass
+
     def close(self) -> None:
         pass
 
@@ -198,10 +216,11 @@ class QuietProgress:
 
 
 def worker_ready() -> str:
-    """Run on every worker before a sweep on an existing cluster: that routefuse imports."""
+    """Run on every worker before a sweep on an existing cluster: that routefuse imports; the
+    hash of the estimator's source the worker runs (:func:`estimator_source`)."""
     import estimator.pipeline  # noqa: F401
 
-    return socket.gethostname()
+    return estimator_source()
 
 
 def decode_log(log: str, topics: TopicChoice, cache_dir: str) -> str | None:
@@ -226,6 +245,12 @@ def run_task(job: TaskJob, decode_error: str | None) -> dict[str, Any]:
     try:
         if decode_error is not None:
             raise RoutefuseError(None, decode_error)
+        if job.estimator_source not in (None, estimator_source()):
+            raise RoutefuseError(
+                _worker_name(),
+                f"this worker runs another routefuse (estimator source {estimator_source()}, "
+                f"the client's {job.estimator_source}): install the client's on every worker",
+            )
         if task.log.route is None:
             raise RoutefuseError(None, task.log.route_error or "no route")
         if job.export_dir is not None:
@@ -364,13 +389,18 @@ def write_task_file(path: Path, data: Mapping[str, Any]) -> None:
 
 
 @contextlib.contextmanager
-def open_client(*, workers: int | None, scheduler: str | None) -> Iterator[Client]:
+def open_client(
+    *, workers: int | None, scheduler: str | None, note: Callable[[str], None] | None = None
+) -> Iterator[Client]:
     """A client of a new LocalCluster (``workers`` single-threaded processes, default one per
     core), or of the running cluster at ``scheduler``; closed (and the cluster stopped) on
-    exit."""
+    exit. On a running cluster, ``note`` is told what the sweep waits for, and every worker
+    must run the client's estimator (:func:`check_workers`)."""
     from distributed import Client, LocalCluster
 
+    say = note if note is not None else (lambda text: None)
     if scheduler is not None:
+        say(f"connecting to the Dask scheduler at {scheduler} (up to {CONNECT_TIMEOUT_S:g} s)")
         try:
             client = Client(scheduler, timeout=CONNECT_TIMEOUT_S)
         except (OSError, TimeoutError, ValueError) as exc:
@@ -378,20 +408,9 @@ def open_client(*, workers: int | None, scheduler: str | None) -> Iterator[Clien
                 scheduler, f"cannot reach the Dask scheduler: {one_line(str(exc), 200)}"
             ) from None
         try:
-            try:
-                client.wait_for_workers(1, timeout=WORKERS_TIMEOUT_S)
-            except TimeoutError:
-                raise RoutefuseError(
-                    scheduler, f"no Dask worker joined within {WORKERS_TIMEOUT_S:g} s"
-                ) from None
-            try:
-                client.run(worker_ready)
-            except Exception as exc:
-                raise RoutefuseError(
-                    scheduler,
-                    "a worker cannot import routefuse (install it on every worker): "
-                    + one_line(f"{type(exc).__name__}: {exc}", 200),
-                ) from None
+            _wait_for_a_worker(client, scheduler, say)
+            check_workers(client, scheduler)
+            say(f"{len(client.scheduler_info()['workers'])} Dask workers ready")
             yield client
         finally:
             client.close()
@@ -412,6 +431,49 @@ def open_client(*, workers: int | None, scheduler: str | None) -> Iterator[Clien
             yield client
     finally:
         cluster.close()
+
+
+def _wait_for_a_worker(client: Client, scheduler: str, say: Callable[[str], None]) -> None:
+    """Until a worker has joined, a line every :data:`WAITING_NOTE_S`; one line and the end
+    after :data:`WORKERS_TIMEOUT_S`."""
+    if client.scheduler_info()["workers"]:
+        return
+    say(f"waiting for a Dask worker to join (up to {WORKERS_TIMEOUT_S:g} s)")
+    started = time.monotonic()
+    while True:
+        left = WORKERS_TIMEOUT_S - (time.monotonic() - started)
+        if left <= 0:
+            raise RoutefuseError(scheduler, f"no Dask worker joined within {WORKERS_TIMEOUT_S:g} s")
+        try:
+            client.wait_for_workers(1, timeout=min(WAITING_NOTE_S, left))
+            return
+        except TimeoutError:
+            waited = time.monotonic() - started
+            if waited < WORKERS_TIMEOUT_S:
+                say(f"no Dask worker yet after {waited:.0f} s")
+
+
+def check_workers(client: Client, scheduler: str) -> None:
+    """Every worker imports routefuse and runs the client's estimator source: a task's id (and
+    so what a resumed sweep keeps) hashes the client's source, so a worker on other code
+    would write rows that a later run takes for this code's."""
+    try:
+        sources = client.run(worker_ready)
+    except Exception as exc:
+        raise RoutefuseError(
+            scheduler,
+            "a worker cannot import routefuse (install it on every worker): "
+            + one_line(f"{type(exc).__name__}: {exc}", 200),
+        ) from None
+    mine = estimator_source()
+    other = sorted(address for address, source in sources.items() if source != mine)
+    if other:
+        raise RoutefuseError(
+            scheduler,
+            f"{len(other)} of {len(sources)} Dask workers run another routefuse (estimator "
+            f"source {sources[other[0]]} on {other[0]}, this client's {mine}): install this "
+            "routefuse on every worker",
+        )
 
 
 @contextlib.contextmanager
@@ -559,7 +621,7 @@ def run_sweep(
             else:
                 runnable.append(task)
         if runnable:
-            with open_client(workers=workers, scheduler=scheduler) as client:
+            with open_client(workers=workers, scheduler=scheduler, note=progress.note) as client:
                 dashboard = dashboard_link(client)
                 progress.start(total=len(tasks), done=skipped, failed=0, dashboard=dashboard)
                 for task_id in fallback:
@@ -626,6 +688,7 @@ def _drive(
     limit = window if window is not None else max(4, 3 * threads)
     # keys are unique per output folder: two sweeps on one scheduler never share a task
     salt = hashlib.sha256(layout.out.resolve().as_posix().encode()).hexdigest()[:10]
+    source = estimator_source()
     pending = deque(tasks)
     in_flight: dict[Future[dict[str, Any]], Task] = {}
     decode: tuple[str, Future[str | None]] | None = None
@@ -655,6 +718,7 @@ def _drive(
                 task_file=str(layout.task_file(task)),
                 export_dir=None if export is None else str(layout.export_dir(task)),
                 replay=export,
+                estimator_source=source,
             )
             future = submit(
                 run_task,

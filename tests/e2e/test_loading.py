@@ -4,6 +4,7 @@ log and route loaded, also from outside the data folders. In Chromium."""
 
 from __future__ import annotations
 
+import re
 import shutil
 import threading
 from pathlib import Path
@@ -54,7 +55,7 @@ def test_controls_wait_for_the_session_and_the_files_tab_names_it(browser, tmp_p
         assert page.get_by_role("slider").count() >= 1
         page.get_by_role("button", name="rejected ›").first.wait_for()
         page.get_by_role("tab", name="Files").click()
-        body = page.inner_text("body")
+        body = " ".join(page.inner_text("body").split())  # the name and path on two lines
         assert "Loaded: log elsewhere.mcap" in body and str(tmp_path) in body
         assert "route elsewhere.route.geojson" in body
     finally:
@@ -63,3 +64,38 @@ def test_controls_wait_for_the_session_and_the_files_tab_names_it(browser, tmp_p
         app.close()
         controller.close()
         server.stop()
+
+
+def test_long_paths_in_the_files_tab_wrap_within_the_panel(browser, tmp_path):
+    """A log and route of long names deep in long folders: the names and their full paths
+    (a line beneath each name) stay inside the panel, and so do the names in the status line
+    (they ran off its right edge, the paths cut)."""
+    from _browser import served, session_page
+
+    deep = tmp_path.joinpath(
+        "fleet_recordings_2026",
+        "vehicle_0042_highway_a8_munich_stuttgart",
+        "session_2026-11-20T08-15-33Z_tunnel_survey",
+    )
+    deep.mkdir(parents=True)
+    stem = "monaco_tunnel_drive_with_a_long_descriptive_name"
+    log = Path(shutil.copy(LOG, deep / f"{stem}.mcap"))
+    route = Path(shutil.copy(ROUTE, deep / f"{stem}.route.geojson"))
+    with served(log, route) as (server, _, app):
+        page, _ = session_page(browser, server, app, {"width": 1400, "height": 900})
+        page.get_by_text("Legend").first.click()
+        page.get_by_role("tab", name="Files").click()
+        loaded = page.locator("div", has_text=re.compile(r"^Loaded:")).last
+        loaded.wait_for()
+        text = loaded.inner_text()
+        assert f"{stem}.mcap" in text and str(log) in text.replace("\n", "")
+        assert str(route) in text.replace("\n", "")
+        status = page.locator("div", has_text=re.compile(f"^{stem}")).last
+        for block in (loaded, status):
+            overrun = block.evaluate(
+                "el => Math.max(...[...el.querySelectorAll('*')].map("
+                "c => c.getBoundingClientRect().right)) - el.getBoundingClientRect().right"
+            )
+            assert overrun <= 1, (overrun, block.inner_text()[:80])
+        page.screenshot(path=str(tmp_path / "files_long_paths.png"))
+        page.close()

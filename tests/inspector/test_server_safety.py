@@ -109,9 +109,9 @@ def test_the_inspector_refuses_websockets_from_other_origins(tmp_path):
         server.stop()
 
 
-def test_a_malformed_allow_origin_is_one_line_exit_2(capsys):
+def test_a_malformed_allow_origin_is_one_line_exit_3(capsys):
     from inspector.cli.main import main
 
-    assert main(["serve", "--allow-origin", "dashboard.lan", "--port", str(_free_port())]) == 2
+    assert main(["serve", "--allow-origin", "dashboard.lan", "--port", str(_free_port())]) == 3
     err = capsys.readouterr().err.strip()
     assert err.startswith("routefuse: error: --allow-origin:") and "\n" not in err

@@ -159,10 +159,10 @@ def cli_argv(command: str, log: Path, route: Path | None) -> list[str]:
 def assert_cli_error(
     capsys: pytest.CaptureFixture[str], argv: Sequence[str], path: Path | str, problem: str
 ) -> None:
-    """Exit code 2 and one line on stderr: ``routefuse: error: <file>: <problem>``."""
+    """Exit code 3 and one line on stderr: ``routefuse: error: <file>: <problem>``."""
     code, _, err = run_cli(capsys, argv)
     assert "Traceback" not in err, err
-    assert code == 2, (code, err)
+    assert code == 3, (code, err)
     lines = err.strip().splitlines()
     assert len(lines) == 1, err
     assert lines[0].startswith(f"routefuse: error: {path}: "), lines[0]

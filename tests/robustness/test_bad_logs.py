@@ -1,5 +1,5 @@
 """Logs that cannot be used: each is a one-line LogError naming the file, through the Python API
-and through ``routefuse info`` / ``routefuse run`` (exit code 2, one line on stderr)."""
+and through ``routefuse info`` / ``routefuse run`` (exit code 3, one line on stderr)."""
 
 from __future__ import annotations
 
@@ -161,7 +161,7 @@ def test_api_raises_one_line_log_error(tmp_path: Path, corpus, name, make, probl
 
 @pytest.mark.parametrize("command", COMMANDS)
 @pytest.mark.parametrize(("name", "make", "problem"), CASES, ids=IDS)
-def test_cli_exits_2_with_one_line(
+def test_cli_exits_3_with_one_line(
     corpus: Corpus, capsys, route: Path, command: str, name, make, problem
 ) -> None:
     path = corpus.build(name, make)

@@ -1,5 +1,5 @@
 """Route files that cannot be used with the base drive (one-line RouteError through the API,
-exit 2 through ``routefuse info`` / ``routefuse run``), and routes that are odd but usable
+exit 3 through ``routefuse info`` / ``routefuse run``), and routes that are odd but usable
 (repeated vertices, zero-length segments, a self-crossing loop): repaired or used as they are,
 with no match accepted onto the wrong branch."""
 
@@ -154,7 +154,7 @@ def test_api_raises_one_line_route_error(
 
 @pytest.mark.parametrize("command", COMMANDS)
 @pytest.mark.parametrize(("name", "make", "problem"), CASES, ids=IDS)
-def test_cli_exits_2_with_one_line(
+def test_cli_exits_3_with_one_line(
     corpus: Corpus, capsys, command: str, name: str, make: Make, problem: str
 ) -> None:
     path = corpus.build(f"route: {name}", make)

@@ -6,7 +6,7 @@ from pathlib import Path
 import numpy as np
 import pytest
 
-from estimator.errors import RouteError
+from estimator.errors import RouteError, WhereToChoose
 from estimator.io import load_route, read_route_file
 from estimator.nav import LocalFrame
 
@@ -186,9 +186,13 @@ def test_an_int_choice_is_an_index_and_the_message_says_where_to_choose(tmp_path
     assert choose_line(path, names, -1) == 1
     assert read_route_file(path, feature=1).name == "south"
     with pytest.raises(RouteLineError) as err:
-        read_route_file(path, how="in the picker")
-    assert str(err.value).endswith("(0: 1, 1: south); choose one in the picker")
-    assert err.value.lines == ("1", "south")
+        read_route_file(path)
+    assert str(err.value).endswith(
+        "(0: 1, 1: south); choose one with --route-feature NAME_OR_INDEX"
+    )
+    in_picker = err.value.choose(WhereToChoose(route_line="in the picker"))
+    assert str(in_picker).endswith("(0: 1, 1: south); choose one in the picker")
+    assert err.value.lines == in_picker.lines == ("1", "south")
     with pytest.raises(RouteLineError, match=r"no line numbered 2; the file has 2 lines"):
         choose_line(path, names, 2)
     with pytest.raises(RouteLineError, match=r"the file has 1 line \(0: x\); choose one with"):

@@ -17,7 +17,7 @@ from headless_tabs import RecordingTab, deliver, settle
 from viser import _messages
 
 from estimator.params import get_param, param_specs
-from inspector.app import ClientView, InspectorApp
+from inspector.app import ClientView, InspectorApp, parameters
 from inspector.controller import Controller, DataFolders
 from inspector.export import headless_server
 
@@ -101,7 +101,8 @@ def _casts(widget, value) -> bool:
     return True
 
 
-def test_parameter_values_out_of_bounds_are_refused_and_change_nothing(two_tabs):
+def test_parameter_values_out_of_bounds_are_refused_and_change_nothing(two_tabs, monkeypatch):
+    monkeypatch.setattr(parameters, "TYPING_REST_S", 0.0)  # refused at once
     server, controller, open_tab = two_tabs
     tab, view = open_tab(1)
     before = controller.params
@@ -128,6 +129,35 @@ def test_parameter_values_out_of_bounds_are_refused_and_change_nothing(two_tabs)
     _send(server, other, second.parameters.widget(spec.name), good)
     assert controller.wait_idle(30)
     assert get_param(controller.params, spec.name) == pytest.approx(good)
+
+
+def test_a_refused_value_on_the_way_to_a_good_one_does_not_break_into_the_typing(
+    two_tabs, monkeypatch
+):
+    """Typing 0.0125 into a box whose minimum is 0.001 sends 0 first: its refusal waits for the
+    control to rest, and the accepted 0.0125 cancels it (the box used to be reset to the old
+    value at the 0, under the person's fingers). Left alone, a refused value is reported and
+    the control shows the value in effect again."""
+    monkeypatch.setattr(parameters, "TYPING_REST_S", 0.5)
+    server, controller, open_tab = two_tabs
+    tab, view = open_tab(1)
+    name = "noise.gyro_arw_deg_sqrt_h"
+    widget = view.parameters.widget(name)
+    before = get_param(controller.params, name)
+    for typed in (0.0, 0.0, 0.01, 0.012, 0.0125):
+        _send(server, tab, widget, typed)
+        assert widget.value == typed  # not put back under the typing
+    time.sleep(1.0)
+    settle(server)
+    assert not tab.notes
+    assert get_param(controller.params, name) == 0.0125 and widget.value == 0.0125
+
+    _send(server, tab, widget, 0.0)
+    assert widget.value == 0.0 and not tab.notes  # still being typed
+    time.sleep(1.0)
+    settle(server)
+    assert _refused(tab, 0) and name.rsplit(".", 1)[1] in tab.notes[-1][1]
+    assert widget.value == 0.0125 == get_param(controller.params, name) != before
 
 
 def test_file_choices_outside_the_listing_are_refused(two_tabs):

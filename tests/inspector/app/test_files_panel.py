@@ -6,6 +6,8 @@ from __future__ import annotations
 
 import shutil
 import time
+from pathlib import Path
+from types import SimpleNamespace
 
 import pytest
 from fake_runs import HOSTILE_LINE, MONACO_LOG, MONACO_ROUTE, fake_run, two_line_route
@@ -102,3 +104,19 @@ def test_a_line_name_is_escaped_where_the_files_tab_shows_it(files_tab):
     assert controller.wait_idle(60) and controller.session.route_feature == 0
     shown = loaded_markdown(controller.session)
     assert "<img" not in shown and "&lt;img src=x onerror=alert\\(1\\)&gt;" in shown
+
+
+def test_each_loaded_file_has_its_full_path_escaped_on_a_line_beneath_its_name():
+    hostile = "<img src=x onerror=alert(1)>"
+    session = SimpleNamespace(
+        route_feature=None,
+        log_name=f"{hostile}.mcap",
+        log_path=Path(f"/data/{hostile}/{hostile}.mcap"),
+        route_name="drive.route.geojson",
+        route_path=Path(f"/data/{hostile}/drive.route.geojson"),
+    )
+    shown = loaded_markdown(session)  # type: ignore[arg-type]
+    assert "<img" not in shown and shown.count("&lt;img src=x onerror=alert\\(1\\)&gt;") == 4
+    log_item, route_item = shown.split("\n")[-2:]
+    assert log_item.index("**&lt;img") < log_item.index("<br>") < log_item.index("/data/")
+    assert route_item.index("**drive") < route_item.index("<br>") < route_item.index("/data/")

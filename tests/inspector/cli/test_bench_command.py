@@ -41,7 +41,7 @@ def test_quick_load_json(tmp_path, capsys):
     ],
 )
 def test_usage_errors(argv, message, tmp_path, capsys):
-    assert main(["bench", "--dir", str(tmp_path), *argv]) == 2
+    assert main(["bench", "--dir", str(tmp_path), *argv]) == 3
     err = capsys.readouterr().err
     assert message in err and len(err.strip().splitlines()) == 1
     assert not (tmp_path / "logs").exists()
@@ -68,7 +68,7 @@ def test_without_a_source_checkout_one_line_says_what_to_do(tmp_path, monkeypatc
 
     installed = tmp_path / "site-packages" / "inspector" / "cli" / "bench.py"
     monkeypatch.setattr(bench, "__file__", str(installed))
-    assert main(["bench", "--dir", str(tmp_path / "bench")]) == 2
+    assert main(["bench", "--dir", str(tmp_path / "bench")]) == 3
     err = capsys.readouterr().err.strip()
     assert len(err.splitlines()) == 1 and "source checkout" in err
     assert not (tmp_path / "bench").exists()

@@ -1,5 +1,5 @@
 """Inputs that used to crash, hang or print unbounded messages: each is one line on stderr and
-exit 2, through :func:`inspector.cli.main.main`."""
+exit 3, through :func:`inspector.cli.main.main`."""
 
 from __future__ import annotations
 
@@ -26,7 +26,7 @@ PROGRESS = re.compile(r"routefuse \w+: [\w ]+ +\d+%")
 
 
 def _fails(argv: list[str], capsys: pytest.CaptureFixture[str], *words: str) -> str:
-    assert main(argv) == 2
+    assert main(argv) == 3
     err = "".join(
         line
         for line in capsys.readouterr().err.splitlines(True)

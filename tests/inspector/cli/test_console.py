@@ -34,10 +34,22 @@ def test_run_through_the_console_writes_and_prints_everything(tmp_path: Path) ->
     assert json.loads(out.read_text(encoding="utf-8"))["methods"]["proposed"]["truth"]
 
 
-def test_an_error_through_the_console_is_one_line_and_exit_2(tmp_path: Path) -> None:
+def test_an_error_through_the_console_is_one_line_and_exit_3(tmp_path: Path) -> None:
     done = _console("info", str(tmp_path / "missing.mcap"), cwd=tmp_path)
-    assert done.returncode == 2
+    assert done.returncode == 3
     assert done.stderr.count("\n") == 1 and "missing.mcap" in done.stderr
+
+
+def test_a_usage_error_and_a_refused_file_have_different_exit_codes(tmp_path: Path) -> None:
+    """argparse's 2 means the command line itself is wrong; a file the command cannot use is
+    3 (both were 2, so a script could not tell them apart), and --help lists every code."""
+    usage = _console("info", "--no-such-option", str(tmp_path / "a.mcap"), cwd=tmp_path)
+    refused = _console("info", str(tmp_path / "a.mcap"), cwd=tmp_path)
+    assert (usage.returncode, refused.returncode) == (2, 3)
+    assert usage.stderr.startswith("usage: ")
+    assert refused.stderr.startswith("routefuse: error: ")
+    listed = _console("--help", cwd=tmp_path).stdout.split("exit codes:")[1].split()
+    assert [word for word in listed if word.isdigit()] == ["0", "1", "2", "3", "4", "130"]
 
 
 def test_version_prints_the_installed_version_and_exits_0(tmp_path: Path) -> None:

@@ -1,5 +1,5 @@
 """``routefuse export`` from the command line: one log with injected outages, a batch that keeps
-going past a corrupt log and a log without a route, and usage errors as one line with exit 2."""
+going past a corrupt log and a log without a route, and refused commands as one line with exit 3."""
 
 from __future__ import annotations
 
@@ -61,7 +61,7 @@ def test_batch_keeps_going_past_bad_logs(bag, tmp_path, capsys):
     out = tmp_path / "out"
     code = main(["export", "--batch", str(data), "--out", str(out), "--fps", "0.5"])
     captured = capsys.readouterr()
-    assert code != 0
+    assert code == 4  # ran to the end, two logs failed
     rows = _summary(out / "summary.csv")
     assert set(rows) == {"corrupt.mcap", "orphan.mcap", "short_tunnel.mcap"}
     good = rows["short_tunnel.mcap"]
@@ -84,7 +84,7 @@ def test_batch_glob(bag, tmp_path, capsys):
     log, _ = bag
     out = tmp_path / "out"
     code = main(["export", "--batch", str(log.parent / "nothing-*.mcap"), "--out", str(out)])
-    assert code == 2
+    assert code == 3
     err = capsys.readouterr().err.strip().splitlines()
     assert len(err) == 1 and "no logs found" in err[0]
 
@@ -102,14 +102,14 @@ def test_batch_glob(bag, tmp_path, capsys):
 def test_usage_errors_are_one_line(bag, tmp_path, capsys, extra, message):
     log, route = bag
     argv = [str(log) if a == "LOG" else str(route) if a == "ROUTE" else a for a in extra]
-    assert main(["export", *argv, "--out", str(tmp_path / "o")]) == 2
+    assert main(["export", *argv, "--out", str(tmp_path / "o")]) == 3
     err = capsys.readouterr().err.strip().splitlines()
     assert len(err) == 1 and err[0].startswith("routefuse: error: ") and message in err[0]
 
 
 def test_missing_log(tmp_path, capsys):
     code = main(["export", str(tmp_path / "nope.mcap"), "--route", "r.geojson", "--out", "o"])
-    assert code == 2
+    assert code == 3
     assert "nope.mcap: no such file" in capsys.readouterr().err
 
 
@@ -117,7 +117,7 @@ def test_output_folder_that_is_a_file(bag, tmp_path, capsys):
     log, route = bag
     out = tmp_path / "taken"
     out.write_text("not a folder")
-    assert main(["export", str(log), "--route", str(route), "--out", str(out)]) == 2
+    assert main(["export", str(log), "--route", str(route), "--out", str(out)]) == 3
     err = capsys.readouterr().err.strip().splitlines()
     assert err[-1].startswith(f"routefuse: error: {out}: cannot create the output folder")
 
@@ -157,7 +157,7 @@ def test_subtract_lane_offset_is_offered_and_every_table_says_which_measure(tmp_
     code = main(
         ["export", "--batch", str(tmp_path), "--out", str(tmp_path / "b"), "--subtract-lane-offset"]
     )
-    assert code == 2
+    assert code == 3
 
 
 @pytest.fixture
@@ -178,12 +178,12 @@ def captured_export(monkeypatch):
 def test_without_route_the_one_beside_the_log_is_used(bag, tmp_path, capsys, captured_export):
     """As ``run`` and ``serve`` do; none beside it is ``run``'s one line."""
     log, route = bag
-    assert main(["export", str(log), "--out", str(tmp_path / "o")]) == 2
+    assert main(["export", str(log), "--out", str(tmp_path / "o")]) == 3
     assert captured_export == [route]
     assert "stopped before exporting" in capsys.readouterr().err
     lone = tmp_path / "lone.mcap"
     shutil.copy(log, lone)
-    assert main(["export", str(lone), "--out", str(tmp_path / "o")]) == 2
+    assert main(["export", str(lone), "--out", str(tmp_path / "o")]) == 3
     assert capsys.readouterr().err == (
         f"routefuse: error: {lone}: no route given and none beside the log (<name>.route.*): "
         "give one with --route\n"
@@ -194,10 +194,10 @@ def test_without_route_the_one_beside_the_log_is_used(bag, tmp_path, capsys, cap
 def test_a_bad_log_and_a_folder_route_are_named(bag, tmp_path, capsys, captured_export):
     bad = tmp_path / "bad.foo"
     bad.write_text("x")
-    assert main(["export", str(bad), "--out", str(tmp_path / "o")]) == 2
+    assert main(["export", str(bad), "--out", str(tmp_path / "o")]) == 3
     assert "bad.foo: unknown log format '.foo'" in capsys.readouterr().err
     log, _ = bag
-    assert main(["export", str(log), "--route", str(tmp_path), "--out", str(tmp_path / "o")]) == 2
+    assert main(["export", str(log), "--route", str(tmp_path), "--out", str(tmp_path / "o")]) == 3
     err = capsys.readouterr().err
     assert err == f"routefuse: error: {tmp_path}: is a folder, expected a route file\n"
     assert captured_export == []
@@ -205,7 +205,7 @@ def test_a_bad_log_and_a_folder_route_are_named(bag, tmp_path, capsys, captured_
 
 def test_a_missing_batch_folder_is_named_missing(tmp_path, capsys):
     missing = tmp_path / "no-such-folder"
-    assert main(["export", "--batch", str(missing), "--out", str(tmp_path / "o")]) == 2
+    assert main(["export", "--batch", str(missing), "--out", str(tmp_path / "o")]) == 3
     assert capsys.readouterr().err == f"routefuse: error: {missing}: no such file or folder\n"
 
 

@@ -82,7 +82,7 @@ def test_topic_options_and_unused_topics(tmp_path: Path, capsys) -> None:
     code, out, _ = _run(capsys, path, "--imu-topic", "/vehicle/imu")
     assert code == 0 and "/vehicle/imu" in out and "100.0 Hz  imu" in out
     code, _, err = _run(capsys, path, "--imu-topic", "/imu/data")
-    assert code == 2
+    assert code == 3
     assert err == (
         f"routefuse: error: {path}: no topic /imu/data (--imu-topic); topics: "
         "/gnss/fix (NavSatFix), /vehicle/imu (Imu), /vehicle/odom (Odometry)\n"
@@ -149,10 +149,10 @@ def _bad_files(tmp_path: Path) -> dict[str, tuple[list[str], str]]:
     }
 
 
-def test_bad_files_exit_2_with_one_line(tmp_path: Path, capsys) -> None:
+def test_bad_files_exit_3_with_one_line(tmp_path: Path, capsys) -> None:
     for name, (argv, problem) in _bad_files(tmp_path).items():
         code, out, err = _run(capsys, *argv)
-        assert code == 2, name
+        assert code == 3, name
         assert out == "" and err.count("\n") == 1 and err.startswith("routefuse: error: /"), name
         assert problem in err, (name, err)
 
@@ -168,7 +168,7 @@ def test_every_shared_data_file(shared_data: Path, capsys) -> None:
     for path in sorted(p for p in shared_data.rglob("*") if p.is_file()):
         if path not in logs and path not in routes:
             code, _, err = _run(capsys, path)
-            assert code == 2 and err.count("\n") == 1 and str(path) in err
+            assert code == 3 and err.count("\n") == 1 and str(path) in err
 
 
 def test_every_sample_log() -> None:
@@ -230,7 +230,7 @@ def test_monaco_gnss_rate_is_the_receivers_5_hz(capsys) -> None:
 def test_route_that_is_a_folder_or_missing(tmp_path: Path, capsys) -> None:
     log = _outage_log(tmp_path / "drive.mcap")
     code, out, err = _run(capsys, log, "--route", tmp_path)
-    assert code == 2 and out == ""
+    assert code == 3 and out == ""
     assert err == f"routefuse: error: {tmp_path}: is a folder, expected a route file\n"
     code, _, err = _run(capsys, tmp_path / "nothing.foo", "--route", tmp_path)
-    assert code == 2 and "nothing.foo: no such file or folder" in err  # the log's problem first
+    assert code == 3 and "nothing.foo: no such file or folder" in err  # the log's problem first

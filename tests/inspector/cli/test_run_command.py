@@ -121,19 +121,19 @@ def test_parameters_reach_the_filter(bag, tmp_path):
 
 def test_errors_are_one_line(bag, tmp_path, capsys):
     log, route = bag
-    assert main(["run", str(tmp_path / "missing.mcap"), "--route", str(route)]) == 2
+    assert main(["run", str(tmp_path / "missing.mcap"), "--route", str(route)]) == 3
     err = capsys.readouterr().err.strip()
     assert err.startswith("routefuse: error:") and "missing.mcap" in err
     assert "\n" not in err
-    assert main(["run", str(log), "--route", str(route), "--outage", "30:20"]) == 2
+    assert main(["run", str(log), "--route", str(route), "--outage", "30:20"]) == 3
     err = capsys.readouterr().err
     assert "END must be after START" in err and err.count("\n") == 1
-    assert main(["run", str(log), "--route", str(route), "--outage", "30-60"]) == 2
+    assert main(["run", str(log), "--route", str(route), "--outage", "30-60"]) == 3
     assert "'30-60' is not START:END in seconds" in capsys.readouterr().err
-    assert main(["run", str(log), "--route", str(route), "--outage", "500:600"]) == 2
+    assert main(["run", str(log), "--route", str(route), "--outage", "500:600"]) == 3
     assert "starts after the log ends" in capsys.readouterr().err
     bad = ["run", str(log), "--route", str(route), "--json", str(tmp_path / "no" / "x.json")]
-    assert main([*bad, "--quiet"]) == 2
+    assert main([*bad, "--quiet"]) == 3
     assert "cannot write" in capsys.readouterr().err
 
 
@@ -155,7 +155,7 @@ def test_comma_bag_with_an_outage(tmp_path, capsys):
 
 
 def test_without_route_the_one_beside_the_log_is_used(bag, tmp_path, capsys):
-    """As ``serve`` does: ``<name>.route.*`` beside the log; none is one line, exit 2."""
+    """As ``serve`` does: ``<name>.route.*`` beside the log; none is one line, exit 3."""
     import shutil
 
     log, route = bag
@@ -166,7 +166,7 @@ def test_without_route_the_one_beside_the_log_is_used(bag, tmp_path, capsys):
     lone = tmp_path / "lone.mcap"
     shutil.copy(log, lone)
     capsys.readouterr()
-    assert main(["run", str(lone)]) == 2
+    assert main(["run", str(lone)]) == 3
     err = capsys.readouterr().err.strip().splitlines()
     assert err == [
         f"routefuse: error: {lone}: no route given and none beside the log (<name>.route.*): "
@@ -200,7 +200,7 @@ BAD_LOGS = ["missing", "empty", "random bytes", "folder", "unknown extension"]
 def test_without_route_a_bad_log_is_reported_as_such(case, tmp_path, capsys):
     """The log's own problem, not "no route given and none beside the log"."""
     log, problem = _bad_logs(tmp_path)[case]
-    assert main(["run", str(log)]) == 2
+    assert main(["run", str(log)]) == 3
     err = capsys.readouterr().err
     assert err.count("\n") == 1 and err.startswith("routefuse: error: "), err
     assert problem in err and "--route" not in err, err
@@ -211,7 +211,7 @@ def test_a_bag_folder_is_still_a_log_without_route(tmp_path, capsys):
     bag_folder = tmp_path / "drive"
     bag_folder.mkdir()
     (bag_folder / "metadata.yaml").write_text("rosbag2_bagfile_information: {}\n")
-    assert main(["run", str(bag_folder)]) == 2
+    assert main(["run", str(bag_folder)]) == 3
     assert "no route given and none beside the log" in capsys.readouterr().err
 
 
@@ -230,10 +230,10 @@ def no_estimation(monkeypatch):
 def test_output_folders_are_checked_before_running(bag, tmp_path, capsys, option, no_estimation):
     log, route = bag
     out = tmp_path / "no" / "such" / "x.out"
-    assert main(["run", str(log), "--route", str(route), option, str(out), "--quiet"]) == 2
+    assert main(["run", str(log), "--route", str(route), option, str(out), "--quiet"]) == 3
     err = capsys.readouterr().err
     assert err == f"routefuse: error: {out}: cannot write: no folder {out.parent}\n"
-    assert main(["run", str(log), "--route", str(route), option, str(tmp_path), "--quiet"]) == 2
+    assert main(["run", str(log), "--route", str(route), option, str(tmp_path), "--quiet"]) == 3
     assert capsys.readouterr().err == f"routefuse: error: {tmp_path}: cannot write: is a folder\n"
 
 
@@ -241,7 +241,7 @@ def test_a_folder_given_as_route_is_named_a_folder(bag, tmp_path, capsys, no_est
     log, _ = bag
     folder = tmp_path / "routes"
     folder.mkdir()
-    assert main(["run", str(log), "--route", str(folder)]) == 2
+    assert main(["run", str(log), "--route", str(folder)]) == 3
     err = capsys.readouterr().err
     assert err == f"routefuse: error: {folder}: is a folder, expected a route file\n"
 

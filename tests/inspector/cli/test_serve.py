@@ -104,11 +104,11 @@ def test_a_bad_outage_fails_like_export_before_the_server_starts(tmp_path, capsy
     started: list = []
     monkeypatch.setattr(serve, "start", lambda **kw: started.append(kw))
     for bad in ("60:30", "abc", "30-60"):
-        assert main(["serve", "--outage", "10:20", "--outage", bad]) == 2
+        assert main(["serve", "--outage", "10:20", "--outage", bad]) == 3
         serve_err = capsys.readouterr().err
         out = str(tmp_path / "out")
         assert (
-            main(["export", "x.mcap", "--route", "r.geojson", "--out", out, "--outage", bad]) == 2
+            main(["export", "x.mcap", "--route", "r.geojson", "--out", out, "--outage", bad]) == 3
         )
         export_err = capsys.readouterr().err
         assert serve_err == export_err  # the same parser, the same one line
@@ -239,13 +239,13 @@ def test_the_route_line_is_checked_before_the_server_starts(tmp_path, capsys, mo
     started: list = []
     monkeypatch.setattr(serve, "start", lambda **kw: started.append(kw))
     log = str(MONACO_LOG)
-    assert main(["serve", log, "--route", str(route)]) == 2
+    assert main(["serve", log, "--route", str(route)]) == 3
     err = capsys.readouterr().err
     assert err == (
         f"routefuse: error: {route}: the file has 2 lines (0: <img src=x onerror=alert(1)>, "
         "1: east); choose one with --route-feature NAME_OR_INDEX\n"
     )
-    assert main(["serve", log, "--route", str(route), "--route-feature", "west"]) == 2
+    assert main(["serve", log, "--route", str(route), "--route-feature", "west"]) == 3
     err = capsys.readouterr().err
     assert err.startswith(f"routefuse: error: {route}: no line feature named or numbered 'west'")
     assert err.count("\n") == 1
@@ -303,7 +303,7 @@ def test_serve_has_run_s_topic_options():
 
 def test_the_topics_are_checked_before_the_server_starts(tmp_path, capsys, monkeypatch):
     """As ``run`` checks them: a log of two IMU topics and no --imu-topic, a topic the log
-    lacks, or --wheel-topic with --no-wheel is one line naming the flag, exit 2, and no server
+    lacks, or --wheel-topic with --no-wheel is one line naming the flag, exit 3, and no server
     starts."""
     from fake_runs import two_imu_log
 
@@ -312,19 +312,19 @@ def test_the_topics_are_checked_before_the_server_starts(tmp_path, capsys, monke
     log, _ = two_imu_log(tmp_path / "data")
     started: list = []
     monkeypatch.setattr(serve, "start", lambda **kw: started.append(kw))
-    assert main(["serve", str(log)]) == 2
+    assert main(["serve", str(log)]) == 3
     err = capsys.readouterr().err
     assert err.startswith(
         f"routefuse: error: {log}: several imu topics: /imu/data, /imu/raw; choose one with "
         "--imu-topic TOPIC (topics: /gnss/fix (NavSatFix), "
     )
     assert err.count("\n") == 1
-    assert main(["serve", str(log), "--imu-topic", "/imu/nope"]) == 2
+    assert main(["serve", str(log), "--imu-topic", "/imu/nope"]) == 3
     err = capsys.readouterr().err
     assert err.startswith(f"routefuse: error: {log}: no topic /imu/nope (--imu-topic); topics: ")
     assert err.count("\n") == 1
     args = ["serve", str(log), "--imu-topic", "/imu/raw", "--wheel-topic", "/wheel/odom"]
-    assert main([*args, "--no-wheel"]) == 2
+    assert main([*args, "--no-wheel"]) == 3
     assert capsys.readouterr().err == (
         f"routefuse: error: {log}: --wheel-topic /wheel/odom and --no-wheel contradict each other\n"
     )

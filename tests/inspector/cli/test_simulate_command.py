@@ -35,18 +35,18 @@ def test_writes_bag_and_route(tmp_path, capsys) -> None:
     assert json.loads(route.read_text())["features"][0]["geometry"]["type"] == "LineString"
     # the same command again refuses to overwrite, --force rewrites the same bytes
     first = bag.read_bytes()
-    assert main(argv) == 2
+    assert main(argv) == 3
     assert "already exists" in capsys.readouterr().err
     assert main([*argv, "--force"]) == 0
     assert bag.read_bytes() == first
 
 
 def test_errors_are_one_line(tmp_path, capsys) -> None:
-    assert main(["simulate", "nowhere", "--out", str(tmp_path)]) == 2
+    assert main(["simulate", "nowhere", "--out", str(tmp_path)]) == 3
     err = capsys.readouterr().err.strip()
     assert err.startswith("routefuse: error: unknown scenario 'nowhere'")
     assert "\n" not in err
-    assert main(["simulate", "short_tunnel"]) == 2
+    assert main(["simulate", "short_tunnel"]) == 3
     assert "--out" in capsys.readouterr().err
 
 
@@ -120,7 +120,7 @@ def test_stress_without_odometer_and_errors(tmp_path, capsys) -> None:
         (["--stress", "2", "--corpus", "-1"], "--corpus: -1: 0 or a held-out corpus"),
         (["short_tunnel", "--corpus", "1"], "--corpus: applies to --stress N only"),
     ):
-        assert main(["simulate", *argv, "--out", str(tmp_path)]) == 2
+        assert main(["simulate", *argv, "--out", str(tmp_path)]) == 3
         err = capsys.readouterr().err.strip()
         assert message in err and "\n" not in err, err
     assert main(["simulate", "--stress", "2", "--out", str(tmp_path), "--force"]) == 0

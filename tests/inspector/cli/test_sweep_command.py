@@ -1,4 +1,4 @@
-"""``routefuse sweep`` argument errors: one line, exit 2, before any cluster starts."""
+"""``routefuse sweep`` argument errors: one line, exit 3, before any cluster starts."""
 
 from __future__ import annotations
 
@@ -11,7 +11,7 @@ from inspector.cli.main import main
 
 def test_a_missing_log_is_named_missing(tmp_path: Path, capsys: pytest.CaptureFixture[str]) -> None:
     missing = tmp_path / "nonexistent.mcap"
-    assert main(["sweep", str(missing), "--out", str(tmp_path / "out")]) == 2
+    assert main(["sweep", str(missing), "--out", str(tmp_path / "out")]) == 3
     assert capsys.readouterr().err == f"routefuse: error: {missing}: no such file or folder\n"
     assert not (tmp_path / "out").exists()
 
@@ -20,7 +20,7 @@ def test_a_glob_matching_nothing_still_says_no_logs_found(
     tmp_path: Path, capsys: pytest.CaptureFixture[str]
 ) -> None:
     pattern = str(tmp_path / "nothing-*.mcap")
-    assert main(["sweep", pattern, "--out", str(tmp_path / "out")]) == 2
+    assert main(["sweep", pattern, "--out", str(tmp_path / "out")]) == 3
     err = capsys.readouterr().err
     assert err.count("\n") == 1 and f"{pattern}: no logs found" in err
 
@@ -28,12 +28,12 @@ def test_a_glob_matching_nothing_still_says_no_logs_found(
 def test_the_failed_tasks_are_named_after_the_summary_even_when_quiet(
     tmp_path: Path, capsys: pytest.CaptureFixture[str]
 ) -> None:
-    """Exit 2 says some task failed; the output says which and why (it used to give only the
+    """Exit 4 says some task failed; the output says which and why (it used to give only the
     count with --quiet, so a CI log could not tell what failed)."""
     empty = tmp_path / "empty.mcap"
     empty.write_bytes(b"")
     out = tmp_path / "out"
-    assert main(["sweep", str(empty), "--out", str(out), "--quiet"]) == 2
+    assert main(["sweep", str(empty), "--out", str(out), "--quiet"]) == 4
     captured = capsys.readouterr()
     lines = captured.out.splitlines()
     assert "1 failed" in lines[0]
@@ -54,7 +54,7 @@ def test_a_log_named_inside_an_unreadable_folder_is_a_failed_row_not_the_end(
     empty.write_bytes(b"")
     unreadable(locked)
     out = tmp_path / "out"
-    assert main(["sweep", str(locked / "a.mcap"), str(empty), "--out", str(out), "--quiet"]) == 2
+    assert main(["sweep", str(locked / "a.mcap"), str(empty), "--out", str(out), "--quiet"]) == 4
     lines = capsys.readouterr().out.splitlines()
     assert "2 failed" in lines[0]
     assert (

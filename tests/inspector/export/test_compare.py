@@ -60,7 +60,7 @@ def test_two_sets_on_one_log_are_compared_attempt_by_attempt(tmp_path, capsys):
                 str(b),
             ]
         )
-        == 2
+        == 3
     )
 
 

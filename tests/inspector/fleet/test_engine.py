@@ -4,20 +4,27 @@ worker killed mid-sweep."""
 
 from __future__ import annotations
 
+import contextlib
 import os
+import re
+import shutil
 import signal
+import subprocess
+import sys
 from pathlib import Path
 
 import pyarrow.parquet as pq
 import pytest
 
+from estimator.errors import RoutefuseError
 from estimator.evaluation import method_metrics
+from estimator.io import TopicChoice
 from estimator.params import Params, with_values
 from estimator.pipeline import open_inputs, run_methods
 from inspector.cli.main import main
 from inspector.fleet import SweepPlan, build_sets, collect_logs, run_sweep
 from inspector.fleet.engine import QuietProgress
-from tests.inspector.fleet.conftest import copy_drive
+from tests.inspector.fleet.conftest import REPO, copy_drive, dask_env
 
 HOSTILE = "<img src=x onerror=alert(1)>&'\""
 OUTAGE = "10:30"
@@ -259,3 +266,97 @@ def test_the_table_is_written_in_chunks_without_holding_every_row(tmp_path, monk
     table.write_table(rows(), [("log", str)], tmp_path)
     assert first_write_after == [2]
     assert (tmp_path / "results.csv").read_text().splitlines()[1:] == [f"log{i}" for i in range(7)]
+
+
+@contextlib.contextmanager
+def _scheduler_without_workers():
+    """An in-process scheduler on a loopback TCP port, with no worker of its own."""
+    from distributed import LocalCluster
+
+    cluster = LocalCluster(
+        n_workers=0, processes=False, protocol="tcp", host="127.0.0.1", dashboard_address=None
+    )
+    try:
+        yield cluster
+    finally:
+        cluster.close()
+
+
+def test_waiting_for_a_worker_says_so_and_ends_with_one_line(monkeypatch):
+    """With --scheduler and no worker, nothing was printed for the minute of the wait."""
+    from inspector.fleet import engine
+
+    monkeypatch.setattr(engine, "WORKERS_TIMEOUT_S", 2.5)
+    monkeypatch.setattr(engine, "WAITING_NOTE_S", 1.0)
+    notes: list[str] = []
+    with _scheduler_without_workers() as cluster:
+        address = cluster.scheduler_address
+        with (
+            pytest.raises(RoutefuseError) as refused,
+            engine.open_client(workers=None, scheduler=address, note=notes.append),
+        ):
+            pass
+    assert str(refused.value) == f"{address}: no Dask worker joined within 2.5 s"
+    assert notes[0] == f"connecting to the Dask scheduler at {address} (up to 30 s)"
+    assert notes[1] == "waiting for a Dask worker to join (up to 2.5 s)"
+    waiting = notes[2:]  # one a second, while the 2.5 s run out (fewer on a busy machine)
+    assert 1 <= len(waiting) <= 2, notes
+    assert all(re.fullmatch(r"no Dask worker yet after \d+ s", n) for n in waiting), notes
+
+
+def test_a_worker_on_other_code_is_refused_before_any_task(tmp_path, short_drive):
+    """The task ids hash the client's estimator source: a worker running another routefuse
+    would write rows a resumed sweep keeps as this code's. It is found before any task runs,
+    with the library's client.run on every worker, and the sweep stops with one line."""
+    other = tmp_path / "other"
+    for package in ("estimator", "inspector"):
+        shutil.copytree(
+            REPO / package, other / package, ignore=shutil.ignore_patterns("__pycache__")
+        )
+    with (other / "estimator" / "errors.py").open("a") as f:
+        f.write("\n# another commit\n")
+    log = copy_drive(short_drive, tmp_path / "logs", "drive")
+    plan = SweepPlan(collect_logs([str(log)]), build_sets([]))
+    with _scheduler_without_workers() as cluster:
+        address = cluster.scheduler_address
+        cmd = [sys.executable, "-m", "dask", "worker", address, "--nthreads", "1",
+               "--host", "127.0.0.1", "--no-dashboard", "--no-nanny",
+               "--local-directory", str(tmp_path / "worker")]  # fmt: skip
+        worker = subprocess.Popen(
+            cmd,
+            env=dict(dask_env(), PYTHONPATH=str(other)),
+            cwd=other,  # python -m puts the working folder first on the path
+            stdout=subprocess.DEVNULL,
+            stderr=subprocess.DEVNULL,
+        )
+        try:
+            with pytest.raises(RoutefuseError) as refused:
+                run_sweep(plan, tmp_path / "out", scheduler=address, progress=QuietProgress())
+        finally:
+            worker.terminate()
+            worker.wait(timeout=30)
+    message = str(refused.value)
+    assert message.startswith(f"{address}: 1 of 1 Dask workers run another routefuse")
+    assert message.endswith("install this routefuse on every worker") and "\n" not in message
+    assert not list((tmp_path / "out" / "tasks").glob("*.json"))  # nothing ran
+
+
+def test_a_task_on_a_worker_of_other_code_fails_instead_of_writing_an_ok_row(tmp_path, short_drive):
+    """A worker that joins after the check still cannot write a row under this code's id."""
+    from inspector.fleet.engine import TaskJob, run_task
+
+    log = copy_drive(short_drive, tmp_path / "logs", "drive")
+    task = SweepPlan(collect_logs([str(log)]), build_sets([])).tasks()[0]
+    job = TaskJob(
+        task=task,
+        topics=TopicChoice(),
+        cache_dir=str(tmp_path / "cache"),
+        task_file=str(tmp_path / "task.json"),
+        export_dir=None,
+        replay=None,
+        estimator_source="0123456789abcdef",
+    )
+    row = run_task(job, None)
+    assert row["status"] != "ok"
+    assert "this worker runs another routefuse" in row["error"]
+    assert "the client's 0123456789abcdef" in row["error"]
