@@ -307,13 +307,14 @@ class FilesPanel:
 
     def show_session(self, session: Session) -> None:
         """Name the files a new session was opened from (also when they are not in the listing:
-        given on the command line outside the data folders) and select them where listed."""
-        self.loaded.content = loaded_markdown(session)
+        given on the command line outside the data folders) and select them where listed.
+        The "Loaded" line is written last: once it names the session, the dropdowns show it."""
         if session.log_name in self.log_choice.options:
             self._show("log", session.log_name)
         if session.route_name in self.route_choice.options:
             self._show("route", session.route_name)
             self._show_lines(session.route_name, session.route_feature)
+        self.loaded.content = loaded_markdown(session)
 
     def show_route_lines_again(self) -> None:
         """Read the chosen route file's lines again, keeping the line shown if it is still
