@@ -142,6 +142,7 @@ def filter_key(p: Params) -> Key:
         ext.gyro_scale_state,
         ext.robust_gnss,
         ext.portal_rerun,
+        ext.portal_rerun_after_alignment,
         ext.cross_track_heading_widen,
         ext.no_wheel_caution,
         p.output_rate_hz,

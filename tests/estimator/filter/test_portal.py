@@ -46,3 +46,28 @@ def test_a_state_saved_at_the_alignment_does_not_judge_the_fixes():
     before, error_before = _outage_at_ten_seconds(after_alignment=False)
     assert len(before.dropped_fix_times) > 40
     assert error_before > 10.0
+
+
+def test_a_re_run_with_the_switch_flipped_is_not_served_the_old_filter():
+    """``extensions.portal_rerun_after_alignment`` changes the filter, so a re-run after it
+    is flipped (the inspector's parameter panel) runs the filter again."""
+    inputs = open_inputs(COMMA, topics=TopicChoice(no_wheel=True))
+    config = load_params(COMMA_CONFIG)
+    flipped = with_values(config, {"extensions.portal_rerun_after_alignment": False})
+    first = run(
+        inputs.log, None, config, method="baseline", frame=inputs.frame, outages=[(10.0, 30.0)]
+    )
+    again = run(
+        inputs.log,
+        None,
+        flipped,
+        method="baseline",
+        frame=inputs.frame,
+        outages=[(10.0, 30.0)],
+        reuse=first,
+    )
+    fresh = run(
+        inputs.log, None, flipped, method="baseline", frame=inputs.frame, outages=[(10.0, 30.0)]
+    )
+    assert again.dropped_fix_times == fresh.dropped_fix_times != ()
+    np.testing.assert_array_equal(again.epochs.position, fresh.epochs.position)

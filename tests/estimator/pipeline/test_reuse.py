@@ -231,3 +231,42 @@ def test_the_replay_compares_extensions_that_exist() -> None:
     fields = {f.name for f in dataclasses.fields(ExtensionParams)}
     assert set(MATCHING_EXTENSIONS) <= fields
     assert len(set(MATCHING_EXTENSIONS)) == len(MATCHING_EXTENSIONS)
+
+
+REPLAYED_ATTEMPT_BY_ATTEMPT = frozenset(
+    {
+        "candidate_validation",
+        "along_track_search",
+        "lane_path_matching",
+        "long_window",
+        "overlap_inflation",
+        "curvature_covariance",
+        "covariance_search",
+        "window_scale_covariance",
+        "search_correction_cap",
+        "map_bias_portal_cut",
+        "dr_separation_gyro_scale",
+    }
+)
+"""extensions a re-run meets by replaying the old attempts (the map bias's fit is redone at
+each outage's start and compared): neither the filter's key nor the trigger's"""
+
+
+def test_every_extension_is_placed_for_re_runs() -> None:
+    """A new switch must say how a re-run meets it: in the filter's key (the filter runs
+    again), among the extensions that decide where attempts fall (replayed from the first
+    outage), or replayed attempt by attempt. ``portal_rerun_after_alignment`` was in none
+    of them, and a re-run after flipping it was served the old filter."""
+    from estimator.params.declarations import ExtensionParams
+    from estimator.pipeline.reuse import MATCHING_EXTENSIONS, filter_key
+
+    base = Params()
+    in_key = set()
+    for f in dataclasses.fields(ExtensionParams):
+        flipped = with_values(base, {f"extensions.{f.name}": not getattr(base.extensions, f.name)})
+        if filter_key(flipped) != filter_key(base):
+            in_key.add(f.name)
+    fields = {f.name for f in dataclasses.fields(ExtensionParams)}
+    placed = in_key | set(MATCHING_EXTENSIONS) | REPLAYED_ATTEMPT_BY_ATTEMPT
+    assert fields == placed, sorted(fields - placed)
+    assert "portal_rerun_after_alignment" in in_key
