@@ -181,7 +181,9 @@ def run_until(
         if aux[A_COV_T] >= cfg[C_COV_DT]:
             flush_into(P, aux, cfg, FA, FB, FC, FF)
         _hold_sample(aux, t, gyro, accel, k)
-        # --- wheel speed / NHC / ZUPT at the aid rate
+        # --- wheel speed / NHC / ZUPT at the aid rate (the NHC's variance grows with the speed
+        # by noise.nhc_mount_sigma_deg; this file's compiled cache holds body_velocity_update
+        # inlined, and numba re-compiles it only when this file changes)
         while idx[I_WHEEL] < nw and wheel_t[idx[I_WHEEL]] <= t:
             idx[I_WHEEL] += 1
         _gather_still_gyro(aux, gyro, k, still[k])

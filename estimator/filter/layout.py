@@ -105,7 +105,8 @@ C_WHITE_VAR = 27  # typical white variance of a horizontal fix coordinate
 C_CROSS_WIDEN = 28  # 1: a fix's heading widening takes only its innovation across the travel
 C_GSF_EST = 29  # 1: the z gyro's scale factor is estimated (E_GSF gets a gain, X_GSF applied)
 C_GSF_BLIND = 30  # 1: no gain uses the considered scale factor (extensions.gyro_scale_blind_gain)
-NC = 31
+C_NHC_TILT2 = 31  # (rad^2) the IMU's misalignment with the vehicle's axes: NHC variance per (m/s)^2
+NC = 32
 
 # output rows
 O_T = 0

@@ -33,6 +33,7 @@ from estimator.filter.layout import (
     C_GSF_BLIND,
     C_GSF_EST,
     C_LEVER,
+    C_NHC_TILT2,
     C_NHC_VAR,
     C_OUT_DT,
     C_QBA,
@@ -463,6 +464,7 @@ def kernel_config(p: Params, frame: LocalFrame, wheel_t: F64) -> F64:
     cfg[C_QBA] = 2 * (n.accel_bias_sigma_mg * MG) ** 2 / n.accel_bias_tau_s
     cfg[C_WHEEL_VAR] = n.wheel_speed_sigma_m_s**2
     cfg[C_NHC_VAR] = n.nhc_sigma_m_s**2
+    cfg[C_NHC_TILT2] = math.radians(n.nhc_mount_sigma_deg) ** 2
     cfg[C_ZUPT_VAR] = n.zupt_sigma_m_s**2
     cfg[C_GNSS_GATE] = n.gnss_chi2_gate
     cfg[C_LEVER : C_LEVER + 3] = p.sensors.gnss_lever_arm_m

@@ -27,6 +27,7 @@ from estimator.filter.layout import (
     C_ARW2,
     C_GSF_BLIND,
     C_GSF_EST,
+    C_NHC_TILT2,
     C_NHC_VAR,
     C_SCALE_ON,
     C_WHEEL_VAR,
@@ -377,6 +378,9 @@ def body_velocity_update(
             use_wheel = False
     off = 0 if use_wheel else 1
     m = 3 - off
+    # R_nhc = sigma^2 + |v|^2 sigma_mount^2: a body axis turned by an unknown angle from the
+    # vehicle's sees speed x angle where the constraint says zero (noise.nhc_mount_sigma_deg)
+    nhc_var = cfg[C_NHC_VAR] + cfg[C_NHC_TILT2] * (v0 * v0 + v1 * v1 + v2 * v2)
     for a in range(3):
         for j in range(NE):
             H[a, j] = 0.0
@@ -392,7 +396,7 @@ def body_velocity_update(
         H[a, 3] = c0
         H[a, 4] = c1
         H[a, 5] = c2
-        R[a, a] = cfg[C_NHC_VAR]
+        R[a, a] = nhc_var
     if use_wheel:
         H[0, E_SCALE] = -w_speed
         R[0, 0] = cfg[C_WHEEL_VAR]
