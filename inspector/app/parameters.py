@@ -11,7 +11,7 @@ from typing import TYPE_CHECKING, Any
 import viser
 
 from estimator.errors import RoutefuseError
-from estimator.params import ParamSpec, get_param, param_specs, params_to_toml
+from estimator.params import Params, ParamSpec, get_param, param_specs, params_to_toml
 from inspector.app.widgets import Event, show_value
 from inspector.controller import PROPOSED_METHODS, format_outages, parse_outages
 
@@ -94,6 +94,9 @@ class ParametersPanel:
         self._outage_timer: threading.Timer | None = None
         self._refusals: dict[str, threading.Timer] = {}
         """per parameter, the report of its refused value waiting for the control to rest"""
+        self._known: dict[str, Any] = {}
+        """per parameter, the controller's value as this panel last knew it: :meth:`sync`
+        shows only what changed on the controller's side since, never over a box being typed"""
         self.method = gui.add_dropdown(
             "method", PROPOSED_METHODS, initial_value=self.controller.method
         )
@@ -126,6 +129,7 @@ class ParametersPanel:
                     widget = param_widget(gui, spec, get_param(params, spec.name))
                     widget.on_update(self._param_setter(spec.name))
                     self._widgets[spec.name] = widget
+                    self._known[spec.name] = _shown(params, spec.name)
 
     def widget(self, name: str) -> viser.GuiInputHandle[Any]:
         """The control of a parameter by dotted name."""
@@ -143,6 +147,9 @@ class ParametersPanel:
                 self.controller.set_param(name, self._widgets[name].value)
             except RoutefuseError as exc:
                 self._refuse_when_rested(name, exc)
+            else:
+                with self._lock:
+                    self._known[name] = _shown(self.controller.params, name)
 
         return set_value
 
@@ -162,7 +169,7 @@ class ParametersPanel:
                 return  # the control changed since
             self._refusals.pop(name, None)
         self.view.notify_error(exc)
-        self.view.sync_params()
+        self.sync(refused=name)
 
     def _on_method(self, event: Event) -> None:
         if event.client is None:
@@ -207,18 +214,21 @@ class ParametersPanel:
             "routefuse-params.toml", text.encode("utf-8"), save_immediately=True
         )
 
-    def sync(self) -> None:
-        """Show the controller's parameters (after another tab changed them, or a failure),
-        except in a control whose refused value waits for the typing to rest."""
+    def sync(self, *, refused: str | None = None) -> None:
+        """Show the controller's parameters where they changed on its side since this panel
+        last knew them (another tab changed them, a reset, a failure), and in the control of
+        ``refused``. Not over a control whose refused value waits for the typing to rest, nor
+        over one whose value the controller still has: a session published while a person
+        types 1234.5 (the run of 1234 done) must not put 1234 back into the box."""
         params = self.controller.params
         for name, widget in self._widgets.items():
-            if name in self._refusals:
-                continue  # being typed: shown when it rests
-            value = get_param(params, name)
-            if isinstance(value, tuple):
-                value = tuple(float(v) for v in value)
-            elif value is None:
-                value = ""
+            value = _shown(params, name)
+            with self._lock:
+                if name in self._refusals:
+                    continue  # being typed: shown when it rests
+                if name != refused and self._known.get(name) == value:
+                    continue
+                self._known[name] = value
             try:
                 if widget.value != value:
                     show_value(widget, value)
@@ -249,3 +259,11 @@ class ParametersPanel:
             if self._outage_timer is not None:
                 self._outage_timer.cancel()
                 self._outage_timer = None
+
+
+def _shown(params: Params, name: str) -> Any:
+    """A parameter's value as its control holds it (tuples of floats, ``""`` for None)."""
+    value = get_param(params, name)
+    if isinstance(value, tuple):
+        return tuple(float(v) for v in value)
+    return "" if value is None else value

@@ -10,6 +10,7 @@ from __future__ import annotations
 import math
 import os
 import time
+from types import SimpleNamespace
 
 import pytest
 from fake_runs import data_folder, fake_open, fake_run
@@ -238,3 +239,27 @@ def test_a_tab_opens_over_a_data_folder_with_a_symlink_loop_and_says_what_it_ski
     assert "data/drive.mcap" in view.files.log_choice.options
     view.files.refresh()
     assert "symlink loop" in view.files.notes.content
+
+
+def test_a_session_published_while_a_value_is_typed_does_not_put_the_old_one_back(two_tabs):
+    """A person types 1234.5: the run of 1234 finishes and its session is published while the
+    box already holds 1234.5 and its callback has not run yet (viser sets the value first).
+    The panel used to show the controller's 1234 over the box, and the callback then read that
+    back and set 1234 (seen in CI under load). A value only the controller changed is shown."""
+    server, controller, open_tab = two_tabs
+    tab, view = open_tab(1)
+    name = "noise.gyro_bias_tau_s"
+    widget = view.parameters.widget(name)
+    _send(server, tab, widget, 1234.0)
+    assert controller.wait_idle(30) and get_param(controller.params, name) == 1234.0
+    widget._impl.value = 1234.5  # the browser's value arrived, its callback not yet run
+    view.set_session(controller.session)
+    assert widget.value == 1234.5
+    for callback in widget._impl.update_cb:  # now it runs
+        callback(SimpleNamespace(client=tab, client_id=tab.client_id, target=widget))
+    assert controller.wait_idle(30) and get_param(controller.params, name) == 1234.5
+
+    controller.set_param(name, 900.0)  # as another tab does: shown here
+    assert controller.wait_idle(30)
+    view.set_session(controller.session)
+    assert widget.value == 900.0
