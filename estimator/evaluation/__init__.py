@@ -9,6 +9,7 @@ from estimator.evaluation.metrics import (
     match_summary,
     method_metrics,
     portal_notes,
+    unattempted_notes,
 )
 
 __all__ = [
@@ -21,4 +22,5 @@ __all__ = [
     "method_metrics",
     "portal_notes",
     "results_document",
+    "unattempted_notes",
 ]

@@ -444,6 +444,36 @@ def portal_notes(run: Run) -> list[str]:
     return notes
 
 
+def unattempted_notes(run: Run) -> list[str]:
+    """One line per GNSS-degraded interval of a matching run in which no match was attempted
+    because the outage was too short or too little was driven in it
+    (``trigger.min_outage_s``, ``trigger.min_outage_distance_m``): "0 of 0" says nothing of
+    why. The distance is the dead-reckoned speed integrated over the interval."""
+    if run.method == "baseline" or not run.degraded_intervals:
+        return []
+    tr = run.params.trigger
+    e = run.epochs
+    notes = []
+    for a, b in run.degraded_intervals:
+        if any(a <= m.t <= b for m in run.matches):
+            continue
+        sel = (e.t >= a) & (e.t <= b)
+        speed = np.hypot(e.velocity[sel, 0], e.velocity[sel, 1])
+        t = e.t[sel]
+        driven = float(np.sum(0.5 * (speed[1:] + speed[:-1]) * np.diff(t))) if len(t) > 1 else 0.0
+        if b - a < tr.min_outage_s:
+            why = f"it lasted {b - a:.1f} s, under trigger.min_outage_s {tr.min_outage_s:g} s"
+        elif driven < tr.min_outage_distance_m:
+            why = (
+                f"{driven:.1f} m were driven in it by dead reckoning, under "
+                f"trigger.min_outage_distance_m {tr.min_outage_distance_m:g} m"
+            )
+        else:
+            continue
+        notes.append(f"no match attempted in the outage at {a - run.t0:.1f} s: {why}")
+    return notes
+
+
 _ROUTE_COLUMNS = (
     ("max_pos_dev_m", "Max pos. dev. [m]"),
     ("mean_pos_dev_m", "Mean pos. dev. [m]"),

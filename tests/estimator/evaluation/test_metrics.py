@@ -1,6 +1,7 @@
 from __future__ import annotations
 
 from dataclasses import replace
+from types import SimpleNamespace
 
 import numpy as np
 import pytest
@@ -396,3 +397,28 @@ def test_portal_notes_name_the_fixes_the_re_run_left_out():
     (one,) = portal_notes(replace(run, dropped_fix_times=(a - 1.0,)))
     assert ": 1 fix of " in one
     assert portal_notes(make_run(0.0, 0.0)) == []
+
+
+def test_an_outage_too_short_for_any_attempt_says_so():
+    """A matching run's outage without an attempt says why: too little driven in it (the
+    dead-reckoned speed integrated), or too short; one with an attempt, and a baseline run,
+    say nothing."""
+    from estimator.evaluation import unattempted_notes
+
+    still = make_run(0.0, 0.0)  # velocity zero through the 10 s outage
+    (note,) = unattempted_notes(still)
+    limit = Params().trigger.min_outage_distance_m
+    assert note == (
+        f"no match attempted in the outage at {OUTAGE[0] - T0:.1f} s: 0.0 m were driven in it "
+        f"by dead reckoning, under trigger.min_outage_distance_m {limit:g} m"
+    )
+    moving = replace(
+        still,
+        epochs=replace(still.epochs, velocity=still.epochs.velocity + np.array([20.0, 0.0, 0.0])),
+    )
+    assert unattempted_notes(moving) == []  # 200 m driven: the attempts had other reasons
+    short = replace(still, degraded_intervals=((OUTAGE[0], OUTAGE[0] + 2.0),))
+    assert "it lasted 2.0 s, under trigger.min_outage_s" in unattempted_notes(short)[0]
+    assert unattempted_notes(replace(still, method="baseline")) == []
+    attempted = make_run(0.0, 0.0, matches=[SimpleNamespace(t=OUTAGE[0] + 5.0)])
+    assert unattempted_notes(attempted) == []

@@ -84,6 +84,7 @@ def test_the_status_line_lists_the_logs_warnings_escaped_and_bounded():
         outages=(),
         off_route=None,
         proposed=SimpleNamespace(
+            method="proposed",
             warnings=("wheel speed looks like km/h",),
             degraded_intervals=(),
             matches=(),
