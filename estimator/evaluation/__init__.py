@@ -9,6 +9,7 @@ from estimator.evaluation.metrics import (
     match_summary,
     method_metrics,
     portal_notes,
+    run_notes,
     unattempted_notes,
 )
 
@@ -22,5 +23,6 @@ __all__ = [
     "method_metrics",
     "portal_notes",
     "results_document",
+    "run_notes",
     "unattempted_notes",
 ]

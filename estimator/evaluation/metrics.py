@@ -458,9 +458,7 @@ def unattempted_notes(run: Run) -> list[str]:
         if any(a <= m.t <= b for m in run.matches):
             continue
         sel = (e.t >= a) & (e.t <= b)
-        speed = np.hypot(e.velocity[sel, 0], e.velocity[sel, 1])
-        t = e.t[sel]
-        driven = float(np.sum(0.5 * (speed[1:] + speed[:-1]) * np.diff(t))) if len(t) > 1 else 0.0
+        driven = float(np.trapezoid(np.hypot(e.velocity[sel, 0], e.velocity[sel, 1]), e.t[sel]))
         if b - a < tr.min_outage_s:
             why = f"it lasted {b - a:.1f} s, under trigger.min_outage_s {tr.min_outage_s:g} s"
         elif driven < tr.min_outage_distance_m:
@@ -472,6 +470,14 @@ def unattempted_notes(run: Run) -> list[str]:
             continue
         notes.append(f"no match attempted in the outage at {a - run.t0:.1f} s: {why}")
     return notes
+
+
+def run_notes(run: Run) -> list[str]:
+    """What a run did at its outages, outage kind by kind, as ``routefuse run`` prints it and
+    the inspector shows it under its status line: the fixes its portal re-runs left out
+    (:func:`portal_notes`), the outages too short for any attempt
+    (:func:`unattempted_notes`) and the map biases measured (:func:`map_bias_notes`)."""
+    return [*portal_notes(run), *unattempted_notes(run), *map_bias_notes(run)]
 
 
 _ROUTE_COLUMNS = (

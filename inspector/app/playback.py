@@ -14,7 +14,7 @@ import numpy as np
 import viser
 
 from estimator.errors import RoutefuseError
-from estimator.evaluation import map_bias_notes, portal_notes, unattempted_notes
+from estimator.evaluation import run_notes
 from estimator.results import Run
 from inspector.app.widgets import Event, markdown_text, show_value, wrapping_anywhere
 from inspector.controller import Session, format_outages
@@ -49,19 +49,19 @@ def status_markdown(s: Session) -> str:
         text += f" · GNSS removed {format_outages(s.outages)} s"
     off = s.off_route.summary() if s.off_route is not None else ""
     text = f"{text} · {off}" if off else text
-    return text + map_bias_markdown(s.proposed) + warnings_markdown(s.proposed.warnings)
+    return text + notes_markdown(s.proposed) + warnings_markdown(s.proposed.warnings)
 
 
 MAX_NOTES_SHOWN = 10
 
 
-def map_bias_markdown(run: Run) -> str:
-    """Where the run found the route drawn off the road driven, outage by outage (escaped),
-    so that an "off the route" summary of a corrected run is not read as a failure; and the
-    fixes its portal re-runs left out, so that an outage entered away from the last fixes
-    shown is not a mystery, and the outages too short for any attempt."""
-    notes = [*portal_notes(run), *unattempted_notes(run), *map_bias_notes(run)]
-    return "".join(f"\n\n{markdown_text(n)}" for n in notes[:MAX_NOTES_SHOWN])
+def notes_markdown(run: Run) -> str:
+    """What the run did at its outages (:func:`~estimator.evaluation.run_notes`, escaped):
+    where it found the route drawn off the road driven, so that an "off the route" summary of
+    a corrected run is not read as a failure; the fixes its portal re-runs left out, so that an
+    outage entered away from the last fixes shown is not a mystery; the outages too short for
+    any attempt."""
+    return "".join(f"\n\n{markdown_text(n)}" for n in run_notes(run)[:MAX_NOTES_SHOWN])
 
 
 MAX_WARNINGS_SHOWN = 5

@@ -209,7 +209,7 @@ NO_TRUTH = (
 def _print_notes(runs: dict[str, Run], summaries: dict[str, dict[str, Any]]) -> None:
     """The degraded intervals, each matching method's match counts, the fixes its portal
     re-runs left out and its map biases, the runs' warnings."""
-    from estimator.evaluation import map_bias_notes, portal_notes, unattempted_notes
+    from estimator.evaluation import run_notes
 
     first = next(iter(runs.values()))
     intervals = [[a - first.t0, b - first.t0] for a, b in first.degraded_intervals]
@@ -225,7 +225,7 @@ def _print_notes(runs: dict[str, Run], summaries: dict[str, dict[str, Any]]) -> 
             f"rejected by {rejected}"
         )
     for method, r in runs.items():
-        for note in [*portal_notes(r), *unattempted_notes(r), *map_bias_notes(r)]:
+        for note in run_notes(r):
             print(f"{method}: {note}")
     for warning in dict.fromkeys(w for r in runs.values() for w in r.warnings):
         print(f"routefuse run: warning: {warning}", file=sys.stderr)
