@@ -488,27 +488,30 @@ def husky(data: Path, work: Path, results: dict[str, Any]) -> dict[str, Any]:
 
     # the same outages with the wheel speed left out (an IMU-only log, issue 17)
     no_wheel = open_inputs(log_path, route_path, topics=TopicChoice(no_wheel=True))
-    cases_nw, warnings_nw = [], {}
-    for o in HUSKY_OUTAGES:
-        outs = [(o.start, min(o.end, end + 1))]
-        runs = run_methods(no_wheel, config, outs, methods=("baseline", "proposed"))
-        cases_nw.append((o, document(log_path, route_path, no_wheel, runs, outs, fixes)))
-        warnings_nw[o] = runs["proposed"].warnings
+
+    def without_wheels(p: Params) -> tuple[list[tuple[Outage, dict[str, Any]]], dict[Outage, Any]]:
+        """Each outage's document against the fixes, and the proposed run's warnings."""
+        docs, warned = [], {}
+        for o in HUSKY_OUTAGES:
+            outs = [(o.start, min(o.end, end + 1))]
+            runs = run_methods(no_wheel, p, outs, methods=("baseline", "proposed"))
+            docs.append((o, document(log_path, route_path, no_wheel, runs, outs, fixes)))
+            warned[o] = runs["proposed"].warnings
+        return docs, warned
+
+    cases_nw, warnings_nw = without_wheels(config)
     results["husky_no_wheel_vs_held_out_fixes"] = [d for _, d in cases_nw]
     # ... and with the default pseudo-position sigma instead of the config's fixed 1 m
     defaults = Params().pseudo
-    loose = with_values(
-        config,
-        {
-            "pseudo.cross_sigma_m": defaults.cross_sigma_m,
-            "pseudo.cross_residual_factor": defaults.cross_residual_factor,
-        },
+    cases_nw_loose, _ = without_wheels(
+        with_values(
+            config,
+            {
+                "pseudo.cross_sigma_m": defaults.cross_sigma_m,
+                "pseudo.cross_residual_factor": defaults.cross_residual_factor,
+            },
+        )
     )
-    cases_nw_loose = []
-    for o in HUSKY_OUTAGES:
-        outs = [(o.start, min(o.end, end + 1))]
-        runs = run_methods(no_wheel, loose, outs, methods=("baseline", "proposed"))
-        cases_nw_loose.append((o, document(log_path, route_path, no_wheel, runs, outs, fixes)))
 
     # defaults against the config (mean over the outages; held-out fixes)
     variants = [
@@ -733,11 +736,14 @@ def _no_wheel_summary(h: dict[str, Any]) -> str:
     def rmse(d: dict[str, Any], m: str) -> float:
         return float(d["methods"][m]["truth"]["rmse_h_err_m"])
 
-    worse = [
-        f"{o.label(end)} ({rmse(d, 'proposed'):.2f} against {rmse(d, 'baseline'):.2f} m)"
-        for o, d in h["cases_nw"]
-        if rmse(d, "proposed") > rmse(d, "baseline") + 0.2
-    ]
+    def worse_than_dead_reckoning(cases: list[tuple[Outage, dict[str, Any]]]) -> list[str]:
+        return [
+            f"{o.label(end)} ({rmse(d, 'proposed'):.2f} against {rmse(d, 'baseline'):.2f} m)"
+            for o, d in cases
+            if rmse(d, "proposed") > rmse(d, "baseline") + 0.2
+        ]
+
+    worse = worse_than_dead_reckoning(h["cases_nw"])
     lines = [
         f"- {len(quiet)} of {len(h['cases_nw'])} outages make no attempt; {len(short_approach)} of "
         "them say why in a warning: the robot drives under `trigger.min_approach_m` (100 m "
@@ -759,11 +765,7 @@ def _no_wheel_summary(h: dict[str, Any]) -> str:
     else:
         lines.append("- No outage is worse than dead reckoning by more than 0.2 m.")
     loose = h["cases_nw_loose"]
-    worse_loose = [
-        f"{o.label(end)} ({rmse(d, 'proposed'):.2f} against {rmse(d, 'baseline'):.2f} m)"
-        for o, d in loose
-        if rmse(d, "proposed") > rmse(d, "baseline") + 0.2
-    ]
+    worse_loose = worse_than_dead_reckoning(loose)
     tight_mean = float(np.mean([rmse(d, "proposed") for _, d in h["cases_nw"]]))
     loose_mean = float(np.mean([rmse(d, "proposed") for _, d in loose]))
     changed = [
