@@ -2,10 +2,12 @@
 
 from __future__ import annotations
 
+import abc
 from collections.abc import Iterator
 from contextlib import contextmanager
 from dataclasses import dataclass
 from pathlib import Path
+from typing import Self
 
 
 class RoutefuseError(Exception):
@@ -43,12 +45,26 @@ class WhereToChoose:
 ON_THE_COMMAND_LINE = WhereToChoose()
 
 
-class ChoiceError(RoutefuseError):
+class ChoiceError(RoutefuseError, abc.ABC):
     """A file holding several of something (a route file's lines, a log's topics of a kind)
     opened without choosing one, or with a choice naming none of them. It is raised where the
     file is read, saying where to choose on the command line; a caller with other controls
     says its own with :meth:`choose`. The message is the problem, where to choose, then
-    ``listing`` (last: a notification cut short loses the listing, not the way out)."""
+    ``listing`` (last: a notification cut short loses the listing, not the way out).
+
+    Abstract: each kind of thing chosen says its own :meth:`way` and :meth:`choose`. It is
+    caught by its class (``except ChoiceError`` in :func:`choices_said`), so an ABC and not a
+    Protocol; and because an exception is made by ``BaseException.__new__``, which does not
+    refuse an abstract class as ``object.__new__`` does, :meth:`__new__` refuses it here."""
+
+    def __new__(cls, *args: object, **kwargs: object) -> Self:
+        if cls.__abstractmethods__:
+            missing = ", ".join(repr(name) for name in sorted(cls.__abstractmethods__))
+            raise TypeError(
+                f"Can't instantiate abstract class {cls.__name__} without an implementation "
+                f"for abstract methods {missing}"
+            )
+        return super().__new__(cls, *args, **kwargs)
 
     def __init__(
         self,
@@ -63,13 +79,13 @@ class ChoiceError(RoutefuseError):
         self.listing = listing
         super().__init__(source, f"{problem}; choose one {self.way(where)}{listing}")
 
+    @abc.abstractmethod
     def way(self, where: WhereToChoose) -> str:
         """Where to choose this error's kind of thing."""
-        raise NotImplementedError
 
+    @abc.abstractmethod
     def choose(self, where: WhereToChoose) -> ChoiceError:
         """The same error, saying where to choose as ``where`` does."""
-        raise NotImplementedError
 
 
 class RouteLineError(RouteError, ChoiceError):

@@ -342,7 +342,11 @@ def accel_bias_warnings(
     its own sigma). On comma2k19's real IMU, mounted 3.8 deg nose-down and run without that
     mount, the forward bias comes out at 89 mg against a 10 mg prior, and the outage's error
     reaches 60 m while the filter claims 15 m: without this line that run is confident and
-    wrong in silence. The tilt named is the one whose gravity is the bias (``asin(b / g)``)."""
+    wrong in silence. The tilt named is the one whose gravity is the bias (``asin(b / g)``).
+    The line also names ``noise.nhc_mount_sigma_deg``: where the mount is not known, giving it a
+    sigma is what makes such a run honest (2 deg there: 16 m off, NEES 1.5; docs/integrity.md,
+    "An IMU mounted tilted"). The inspector shows 300 characters of a warning; at the default
+    prior this line stays within them for any bias up to 1 g and outages before 100 000 s."""
     prior = p.noise.accel_bias_init_sigma_mg * MG
     for c in checkpoints:
         if c.kind != "outage":
@@ -359,12 +363,11 @@ def accel_bias_warnings(
             a, _ = degraded[c.interval]
             deg = math.degrees(math.asin(min(abs(b) / GRAVITY, 1.0)))
             return (
-                f"the accelerometer's {name} bias is estimated at {b:+.2f} m/s^2 "
-                f"({abs(b) / MG:.0f} mg) at the outage at {a - t_start:.1f} s, "
-                f"{abs(b) / prior:.0f} times its prior sigma (noise.accel_bias_init_sigma_mg "
-                f"{p.noise.accel_bias_init_sigma_mg:g} mg): gravity through an IMU mounted "
-                f"{deg:.1f} deg {minus if b < 0 else plus} that the config does not give "
-                f"({tilt})? The outages drift with it",
+                f"the accelerometer's {name} bias is estimated at {b / MG:+.0f} mg, "
+                f"{abs(b) / prior:.0f} times its {p.noise.accel_bias_init_sigma_mg:g} mg prior "
+                f"sigma, at the outage at {a - t_start:.1f} s: gravity through an IMU mounted "
+                f"{deg:.1f} deg {minus if b < 0 else plus}? The outages drift with it; give the "
+                f"mount ({tilt}) or, if unknown, a sigma for it (noise.nhc_mount_sigma_deg)",
             )
     return ()
 

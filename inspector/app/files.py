@@ -55,6 +55,13 @@ def _transfers(*guis: viser.GuiApi) -> list[tuple[str, dict[str, Any]]]:
     return [item for states in seen.values() for item in list(states.items())]
 
 
+def not_a_line(line: str, route: str) -> RoutefuseError:
+    """The refusal of a route line that the route file ``route`` does not offer, one wording
+    wherever the tab checks it (choosing the line, and again on 'open'): the browser may send
+    any text, so it is shown quoted and cut to 60 characters."""
+    return RoutefuseError(ROUTE_LINE_FIELD, f"{line[:60]!r} is not a line of {route}")
+
+
 PATH_STYLE = "; font-size: 0.85em; opacity: 0.75"
 """the full path's line beneath a file's name: smaller and paler than the name"""
 
@@ -214,10 +221,7 @@ class FilesPanel:
         if value == CHOOSE_LINE or value in self._lines:
             self._accepted_line = value
             return
-        self.view.notify_error(
-            RoutefuseError(ROUTE_LINE_FIELD, f"{value[:60]!r} is not a line of this file"),
-            "Refused",
-        )
+        self.view.notify_error(not_a_line(value, self.route_choice.value), "Refused")
         show_value(self.route_line, self._accepted_line)
 
     def _show_lines(self, route_name: str, chosen: RouteFeature | str = CHOOSE_LINE) -> None:
@@ -268,10 +272,7 @@ class FilesPanel:
             return
         line = self.route_line.value if self._lines else CHOOSE_LINE
         if line != CHOOSE_LINE and line not in self._lines:
-            self.view.notify_error(
-                RoutefuseError(ROUTE_LINE_FIELD, f"{line[:60]!r} is not a line of {route}"),
-                "Refused",
-            )
+            self.view.notify_error(not_a_line(line, route), "Refused")
             return
         feature = self._lines.get(line)  # None before a line is chosen: opening says to
         controller = self.controller

@@ -69,3 +69,18 @@ def test_other_errors_pass_through_unchanged():
     with pytest.raises(RouteError) as caught, choices_said(ELSEWHERE):
         raise other
     assert caught.value is other
+
+
+def test_a_choice_error_that_does_not_say_where_to_choose_cannot_be_made():
+    """``way`` and ``choose`` are abstract: an exception's ``BaseException.__new__`` does not
+    refuse an abstract class by itself, ``ChoiceError.__new__`` does."""
+
+    class WayOnly(ChoiceError):
+        def way(self, where: WhereToChoose) -> str:
+            return where.route_line
+
+    with pytest.raises(TypeError, match=r"abstract class WayOnly .* 'choose'$"):
+        WayOnly("r.geojson", "the file has 2 lines")
+    with pytest.raises(TypeError, match=r"abstract class ChoiceError .* 'choose', 'way'$"):
+        ChoiceError("r.geojson", "the file has 2 lines")  # type: ignore[abstract]
+    assert not RouteLineError.__abstractmethods__ and not TopicError.__abstractmethods__

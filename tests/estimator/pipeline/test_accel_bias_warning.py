@@ -22,11 +22,11 @@ from inspector.app.playback import MAX_WARNING_CHARS
 
 CONFIG = Path(__file__).resolve().parents[3] / "sample_logs" / "configs" / "comma2k19_i280.toml"
 LINE = re.compile(
-    r"the accelerometer's (?P<axis>forward|lateral) bias is estimated at (?P<b>[-+][\d.]+) "
-    r"m/s\^2 \((?P<mg>\d+) mg\) at the outage at (?P<a>[\d.]+) s, (?P<n>\d+) times "
-    r"its prior sigma \(noise.accel_bias_init_sigma_mg 10 mg\): gravity through an IMU mounted "
-    r"(?P<deg>[\d.]+) deg (?P<how>nose-down|nose-up|rolled left|rolled right) that the config "
-    r"does not give \(sensors.imu_(?:pitch|roll)_deg\)\? The outages drift with it$"
+    r"the accelerometer's (?P<axis>forward|lateral) bias is estimated at (?P<mg>[-+]\d+) mg, "
+    r"(?P<n>\d+) times its 10 mg prior sigma, at the outage at (?P<a>[\d.]+) s: gravity through "
+    r"an IMU mounted (?P<deg>[\d.]+) deg (?P<how>nose-down|nose-up|rolled left|rolled right)\? "
+    r"The outages drift with it; give the mount \(sensors\.imu_(?:pitch|roll)_deg\) or, if "
+    r"unknown, a sigma for it \(noise\.nhc_mount_sigma_deg\)$"
 )
 
 
@@ -49,7 +49,7 @@ def test_a_bias_beyond_four_prior_sigmas_and_three_of_its_own_is_named_with_its_
         "100.0",
         "4.0",
         "nose-down",
-        "70",
+        "-70",
     )
     rolled = _outage((0.0, 0.5, 0.0), 0.02)
     (line,) = accel_bias_warnings([rolled], [(110.0, 150.0)], 10.0, Params())

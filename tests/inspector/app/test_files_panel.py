@@ -93,7 +93,7 @@ def test_a_route_line_the_file_does_not_have_is_refused(files_tab):
     _send(server, tab, files.route_line, "7: evil")
     assert (
         tab.notes[-1][0] == "Refused"
-        and "'7: evil' is not a line of this file" in (tab.notes[-1][1])
+        and "'7: evil' is not a line of data/two.route.geojson" in (tab.notes[-1][1])
     )
     assert files.route_line.value == CHOOSE_LINE
 
