@@ -587,6 +587,14 @@ class ExtensionParams:
         "an outage 10 s after the start: every fix from 3.8 s dropped, the filter 17 m off "
         "as the outage began)",
     )
+    align_track_accel: bool = param(
+        True,
+        "an alignment in motion without wheel speed takes the car's acceleration from the "
+        "GNSS track (a parabola through the aligning chord's fixes, weighed against a 1 m/s^2 "
+        "prior; none where they cannot tell it) when it levels the accelerometer, and widens "
+        "the tilt's sigma by what it leaves unknown: comma2k19 starts accelerating 1.4 m/s^2, "
+        "levelled 9 deg nose-up under a 1.5 deg sigma without it",
+    )
     wheel_scale_state: bool = param(True, "estimate the wheel-speed scale factor as a state")
     gyro_scale_consider: bool = param(
         True,

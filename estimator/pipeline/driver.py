@@ -340,13 +340,15 @@ def accel_bias_warnings(
     """One line for the first outage whose start finds the accelerometer's forward or lateral
     bias estimated beyond :data:`ACCEL_BIAS_PRIOR_SIGMAS` of its prior (and beyond three of
     its own sigma). On comma2k19's real IMU, mounted 3.8 deg nose-down and run without that
-    mount, the forward bias comes out at 89 mg against a 10 mg prior, and the outage's error
-    reaches 60 m while the filter claims 15 m: without this line that run is confident and
-    wrong in silence. The tilt named is the one whose gravity is the bias (``asin(b / g)``).
-    The line also names ``noise.nhc_mount_sigma_deg``: where the mount is not known, giving it a
-    sigma is what makes such a run honest (2 deg there: 16 m off, NEES 1.5; docs/integrity.md,
-    "An IMU mounted tilted"). The inspector shows 300 characters of a warning; at the default
-    prior this line stays within them for any bias up to 1 g and outages before 100 000 s."""
+    mount, the forward bias comes out at -64 mg against a 10 mg prior (the mount's gravity is
+    66 mg), and the outage's error reaches 78 m while the filter claims a fraction of it:
+    without this line that run is confident and wrong in silence. The tilt named is the one
+    whose gravity is the bias (``asin(b / g)``). The line also names
+    ``noise.nhc_mount_sigma_deg``: where the mount is not known, giving it a sigma is what
+    makes such a run honest (2 deg there: 14.6 m RMS against 33.4 m, NEES 1.4 against 17;
+    docs/integrity.md, "An IMU mounted tilted" and "Levelled through the car's
+    acceleration"). The inspector shows 300 characters of a warning; at the default prior this
+    line stays within them for any bias up to 1 g and outages before 100 000 s."""
     prior = p.noise.accel_bias_init_sigma_mg * MG
     for c in checkpoints:
         if c.kind != "outage":

@@ -143,6 +143,7 @@ def filter_key(p: Params) -> Key:
         ext.robust_gnss,
         ext.portal_rerun,
         ext.portal_rerun_after_alignment,
+        ext.align_track_accel,
         ext.cross_track_heading_widen,
         ext.no_wheel_caution,
         p.output_rate_hz,

@@ -76,8 +76,9 @@ def comma(shared_data: Path):
 @pytest.mark.parametrize("method", ["baseline", "proposed"])
 def test_comma2k19_without_its_mount_is_told_and_with_it_is_not(comma, method):
     """The EON is mounted 3.8 deg nose-down: run without the config, the forward bias comes out
-    at about 89 mg against a 10 mg prior, and the outage's error reaches tens of metres while
-    the filter's sigma stays under 15 m. With the config's mount the line is not there."""
+    at about -64 mg against a 10 mg prior (the line names a 3.6 deg tilt), and the outage's
+    error reaches tens of metres while the filter's sigma stays a fraction of it. With the
+    config's mount the line is not there."""
     bare = run_methods(comma, Params(), methods=(method,), outages=[(20.0, 50.0)])[method]
     (line,) = [w for w in bare.warnings if w.startswith("the accelerometer")]
     m = LINE.match(line)
