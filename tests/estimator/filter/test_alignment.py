@@ -71,18 +71,33 @@ def test_the_tracks_acceleration_is_the_parabolas_where_the_fixes_tell_it() -> N
     along = 9.0 * t + 0.5 * 1.4 * t**2
     pos = np.column_stack([np.cos(yaw) * along, np.sin(yaw) * along])
     noise = np.random.default_rng(3).normal(0.0, 0.005, pos.shape)
-    acc, var = _track_accel(t, pos + noise, yaw)
+    heading = np.full_like(t, yaw)
+    acc, var = _track_accel(t, pos + noise, heading)
     assert acc == pytest.approx(1.4, abs=0.1)
     assert var < 0.01 * ACCEL_PRIOR_SIGMA_M_S2**2
     # scattered by 10 cm the fit is still surer than the prior, which pulls it in a little
     fair = pos + np.random.default_rng(5).normal(0.0, 0.1, pos.shape)
-    acc, var = _track_accel(t, fair, yaw)
+    acc, var = _track_accel(t, fair, heading)
     assert 0.0 < var < 0.5 * ACCEL_PRIOR_SIGMA_M_S2**2 and abs(acc - 1.4) < 3 * np.sqrt(var) + 0.1
     # scattered by a metre, or too few for a parabola and its scatter, they tell nothing: the
     # alignment levels as without them (no acceleration, its tilt sigma not widened)
     noisy = pos + np.random.default_rng(4).normal(0.0, 1.0, pos.shape)
-    assert _track_accel(t, noisy, yaw) == (0.0, 0.0)
-    assert _track_accel(t[:5], pos[:5], yaw) == (0.0, 0.0)
+    assert _track_accel(t, noisy, heading) == (0.0, 0.0)
+    assert _track_accel(t[:5], pos[:5], heading[:5]) == (0.0, 0.0)
+
+
+def test_a_turning_chord_at_a_steady_speed_has_no_track_acceleration() -> None:
+    """A chord may turn 30 deg (``_chord_heading``): its steps are taken along the yaw between
+    the fixes, or the arc's shortening against one direction would read as 1.3 m/s^2 (8 deg of
+    pitch) at a steady 10 m/s."""
+    t = np.arange(0.0, 1.01, 0.1)
+    yaw = np.radians(30.0) * t
+    radius = 10.0 / np.radians(30.0)
+    pos = np.column_stack([radius * np.sin(yaw), radius * (1.0 - np.cos(yaw))])
+    acc, _ = _track_accel(t, pos, yaw)
+    assert abs(acc) < 0.02
+    acc, _ = _track_accel(t, pos, np.full_like(t, yaw[-1]))
+    assert acc > 1.0
 
 
 def _comma_first_pitch(no_wheel: bool, track_accel: bool = True) -> float:
