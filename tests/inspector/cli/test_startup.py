@@ -4,6 +4,7 @@ needs when it runs. Checked in a fresh interpreter, so this test's own imports d
 
 from __future__ import annotations
 
+import os
 import subprocess
 import sys
 from pathlib import Path
@@ -27,6 +28,43 @@ def test_building_the_parser_imports_nothing_heavy() -> None:
 def test_the_log_registry_and_the_estimator_face_are_light() -> None:
     code = "import estimator, estimator.io; estimator.io.LOG_FORMATS_TEXT"
     assert _imported_after(code) == []
+
+
+NOT_FOR_RUN = (
+    "viser",
+    "matplotlib",
+    "dask",
+    "rosbags",  # the log comes from the decoded-log cache on a warm start
+    "scipy.ndimage",
+    "scipy.signal",
+    "scipy.stats",
+    "scipy.spatial",
+    "inspector.app",
+    "inspector.controller",
+    "estimator.sim",
+)
+
+
+def test_run_imports_only_what_the_estimation_needs(tmp_path: Path) -> None:
+    """``routefuse run`` (started twice: the second start reads the decoded-log cache, as a
+    warm start does) imports neither the inspector's browser side nor the simulator, nor any
+    scipy module besides ``scipy.linalg``, which numba itself imports for BLAS."""
+    log = REPO / "sample_logs" / "monaco_tunnel.mcap"
+    route = REPO / "sample_logs" / "monaco_tunnel.route.geojson"
+    code = (
+        "import contextlib, io, sys\n"
+        "from inspector.cli.main import main\n"
+        "with contextlib.redirect_stdout(io.StringIO()):\n"
+        f"    assert main(['run', {str(log)!r}, '--route', {str(route)!r}, '--quiet']) == 0\n"
+        f"print(' '.join(m for m in {NOT_FOR_RUN!r} if m in sys.modules))"
+    )
+    env = dict(os.environ, ROUTEFUSE_CACHE_DIR=str(tmp_path))
+    for _ in range(2):
+        out = subprocess.run(
+            [sys.executable, "-c", code], cwd=REPO, env=env, capture_output=True, text=True
+        )
+        assert out.returncode == 0, out.stderr
+    assert out.stdout.split() == []
 
 
 def test_help_prints_every_command() -> None:
