@@ -42,13 +42,19 @@ NOT_FOR_RUN = (
     "inspector.app",
     "inspector.controller",
     "estimator.sim",
+    "inspector.cli.serve",  # nor the other commands' modules (their options are not built)
+    "inspector.cli.export",
+    "inspector.cli.bench",
+    "inspector.cli.sweep",
+    "inspector.cli.simulate",
 )
 
 
 def test_run_imports_only_what_the_estimation_needs(tmp_path: Path) -> None:
     """``routefuse run`` (started twice: the second start reads the decoded-log cache, as a
     warm start does) imports neither the inspector's browser side nor the simulator, nor any
-    scipy module besides ``scipy.linalg``, which numba itself imports for BLAS."""
+    scipy module besides ``scipy.linalg``, which numba itself imports for BLAS, nor the other
+    commands' modules."""
     log = REPO / "sample_logs" / "monaco_tunnel.mcap"
     route = REPO / "sample_logs" / "monaco_tunnel.route.geojson"
     code = (
@@ -77,3 +83,14 @@ def test_help_prints_every_command() -> None:
     ).stdout
     for name in ("info", "run", "simulate", "serve", "export", "bench"):
         assert name in out
+
+
+def test_a_parser_for_one_command_parses_it_as_the_whole_parser_does() -> None:
+    from inspector.cli.main import _command_of, build_parser
+
+    argv = ["--debug", "run", "a.mcap", "--route", "r.geojson", "--method", "proposed"]
+    assert _command_of(argv) == "run" and _command_of(["--version"]) is None
+    whole, one = build_parser().parse_args(argv), build_parser("run").parse_args(argv)
+    assert vars(whole) == vars(one)
+    assert build_parser("run").format_usage() == build_parser().format_usage()
+    assert build_parser("nonsense").format_help() == build_parser().format_help()
