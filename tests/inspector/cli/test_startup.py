@@ -47,6 +47,8 @@ NOT_FOR_RUN = (
     "inspector.cli.bench",
     "inspector.cli.sweep",
     "inspector.cli.simulate",
+    "tomllib",  # read only for --config
+    "tomli_w",
 )
 
 
