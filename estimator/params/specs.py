@@ -8,13 +8,10 @@ import dataclasses
 import difflib
 import math
 import stat
-import tomllib
 from collections.abc import Iterator
 from dataclasses import dataclass, fields, is_dataclass, replace
 from pathlib import Path
 from typing import Any, get_args, get_type_hints
-
-import tomli_w
 
 from estimator.errors import ConfigError
 from estimator.params.declarations import Params
@@ -174,6 +171,8 @@ read."""
 
 def load_params(path: str | Path, base: Params | None = None) -> Params:
     """Parameters from a TOML file (tables named like the groups; unknown keys are errors)."""
+    import tomllib  # here, not above: a run without a config file does not need it
+
     path = Path(path)
     try:
         info = path.stat()
@@ -216,6 +215,8 @@ def params_to_toml(params: Params) -> str:
             node = node.setdefault(g, {})
         node[leaf] = list(value) if isinstance(value, tuple) else value
     head = "# routefuse estimator parameters (routefuse run --config FILE)\n"
+    import tomli_w
+
     return head + tomli_w.dumps(tree)
 
 

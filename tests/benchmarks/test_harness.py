@@ -68,3 +68,20 @@ def test_table_names_figures_targets_and_failures():
     assert "x real time (cpu) 1,441" in text and ">= 1000x real time: met" in text
     assert "FAILED: exit 1: boom" in text
     assert "cpu X, 2 cores" in text and "load average at start 3.0" in text
+
+
+def test_timed_commands_read_byte_code_even_where_the_shell_turns_it_off(tmp_path, monkeypatch):
+    """With ``PYTHONDONTWRITEBYTECODE`` set, the start-up commands would compile routefuse's
+    modules from source at every run, which no installed routefuse does: their byte code goes
+    to the bench's cache folder instead (the checkout untouched). Otherwise nothing changes."""
+    from benchmarks.measures import _command_env
+
+    monkeypatch.setenv("ROUTEFUSE_CACHE_DIR", str(tmp_path))
+    monkeypatch.delenv("PYTHONPYCACHEPREFIX", raising=False)
+    monkeypatch.setenv("PYTHONDONTWRITEBYTECODE", "1")
+    env = _command_env()
+    assert "PYTHONDONTWRITEBYTECODE" not in env
+    assert env["PYTHONPYCACHEPREFIX"] == str(tmp_path / "pycache")
+    monkeypatch.delenv("PYTHONDONTWRITEBYTECODE")
+    env = _command_env()
+    assert "PYTHONPYCACHEPREFIX" not in env and "PYTHONDONTWRITEBYTECODE" not in env
