@@ -338,6 +338,10 @@ class Epochs:
     """(N, 3) roll, pitch, yaw (ENU yaw, counter-clockwise from East), rad"""
     position_sigma: F64
     """(N, 3) 1-sigma E, N, U, m"""
+    position_cov_en: F64
+    """(N,) covariance of the E and N errors, m^2: with ``position_sigma`` the horizontal
+    ellipse, long along the road in an outage, which the sigmas alone draw across it wherever
+    the road runs diagonally"""
     yaw_sigma: F64
     """(N,) rad"""
     gnss_used: NDArray[np.bool_]

@@ -106,7 +106,8 @@ def summary(rows: list[dict[str, Any]], corpus: int = 0) -> str:
     lines = [
         f"{which}{len(rows)} drives, {len(rows) - len(ok)} failed. Truth RMSE over the GNSS "
         "outages; "
-        "NEES = horizontal position error over the filter's sigmas (2 dof: 2 on average, "
+        "NEES = horizontal position error over the filter's horizontal covariance, its E-N "
+        "term included (2 dof: 2 on average, "
         "5 % of epochs over 5.99 when the covariance is honest).",
         "",
         "| drives | run | <= baseline + 0.2 m | median run / baseline | median truth RMSE [m] | "

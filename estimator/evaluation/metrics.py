@@ -119,10 +119,12 @@ def interval_mask(t: F64, intervals: Sequence[tuple[float, float]]) -> NDArray[n
 
 
 def outage_errors(run: Run, log: Log, frame: LocalFrame) -> tuple[F64, F64]:
-    """The horizontal error against truth ((N, 2) E, N, m) and its NEES (``(N,)``, 2 dof: the
-    error over the filter's own E and N sigmas) at the run's epochs inside its GNSS-degraded
-    intervals and the truth's span; empty without truth. Is the covariance honest? The NEES
-    averages 2, and 5 % of epochs exceed 5.99, when it is."""
+    """The horizontal error against truth ((N, 2) E, N, m) and its NEES (``(N,)``, 2 dof:
+    e' P^-1 e with the filter's own horizontal covariance) at the run's epochs inside its
+    GNSS-degraded intervals and the truth's span; empty without truth. Is the covariance
+    honest? The NEES averages 2, and 5 % of epochs exceed 5.99, when it is. The E-N
+    covariance counts: in an outage the ellipse is long along the road, and the E and N
+    sigmas alone would spread its length over any error across a diagonal road."""
     if log.truth is None:
         return np.zeros((0, 2)), np.zeros(0)
     e = run.epochs
@@ -131,8 +133,21 @@ def outage_errors(run: Run, log: Log, frame: LocalFrame) -> tuple[F64, F64]:
     err: F64 = e.position[sel, :2] - np.column_stack(
         [np.interp(e.t[sel], log.truth.t, truth[:, i]) for i in range(2)]
     )
-    nees: F64 = np.sum((err / e.position_sigma[sel, :2]) ** 2, axis=1)
-    return err, nees
+    return err, horizontal_nees(err, e.position_sigma[sel, :2] ** 2, e.position_cov_en[sel])
+
+
+def horizontal_nees(err: F64, var_en: F64, cov_en: F64) -> F64:
+    """e' P^-1 e per row for the errors ``err`` ((N, 2) E, N) under P = [[var_e, cov], [cov,
+    var_n]]; a row whose P is not positive definite (rounding) is taken without its cov."""
+    var_e, var_n = var_en[:, 0], var_en[:, 1]
+    det = var_e * var_n - cov_en**2
+    ok = det > 1e-12 * var_e * var_n
+    cov = np.where(ok, cov_en, 0.0)
+    det = np.where(ok, det, var_e * var_n)
+    e, n = err[:, 0], err[:, 1]
+    # P^-1 = [[var_n, -cov], [-cov, var_e]] / det
+    nees: F64 = (var_n * e * e - 2.0 * cov * e * n + var_e * n * n) / det
+    return nees
 
 
 def _lane_offsets(run: Run, route: Route, s: F64, lat: F64, params: Params) -> F64:

@@ -42,6 +42,7 @@ from estimator.filter.layout import (
     I_WHEEL,
     NE,
     NX,
+    O_COV_EN,
     O_DIST,
     O_DR,
     O_GNSS,
@@ -108,6 +109,7 @@ def write_row(x: F64, P: F64, aux: F64, idx: I64, out: F64) -> None:
     out[r, O_RPY + 1] = pitch
     out[r, O_RPY + 2] = yaw
     out[r, O_SIG_YAW] = math.sqrt(max(P[E_ATT + 2, E_ATT + 2], 0.0))
+    out[r, O_COV_EN] = P[E_POS, E_POS + 1]
     out[r, O_GNSS] = used
     out[r, O_DR] = aux[A_DR]
     out[r, O_DR + 1] = aux[A_DR + 1]

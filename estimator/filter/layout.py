@@ -118,7 +118,8 @@ O_SIG_YAW = 13
 O_GNSS = 14  # a fix was used since the previous row
 O_DR = 15  # (2) the DR track
 O_DIST = 17  # distance travelled
-NO = 18
+O_COV_EN = 18  # the E and N position errors' covariance
+NO = 19
 
 # what run_until returns
 STATUS_DONE = 0

@@ -345,7 +345,7 @@ def accel_bias_warnings(
     without this line that run is confident and wrong in silence. The tilt named is the one
     whose gravity is the bias (``asin(b / g)``). The line also names
     ``noise.nhc_mount_sigma_deg``: where the mount is not known, giving it a sigma is what
-    makes such a run honest (2 deg there: 14.6 m RMS against 33.4 m, NEES 1.4 against 17;
+    makes such a run honest (2 deg there: 14.6 m RMS against 33.4 m, NEES 1.3 against 17;
     docs/integrity.md, "An IMU mounted tilted" and "Levelled through the car's
     acceleration"). The inspector shows 300 characters of a warning; at the default prior this
     line stays within them for any bias up to 1 g and outages before 100 000 s."""

@@ -48,6 +48,7 @@ def make_run(
         velocity=np.zeros((n, 3)),
         attitude=np.column_stack([np.zeros(n), np.zeros(n), yaw]),
         position_sigma=np.ones((n, 3)),
+        position_cov_en=np.zeros(n),
         yaw_sigma=np.full(n, 0.01),
         gnss_used=(t - T0 < 30) | (t - T0 > 80),
         degraded=(t - T0 >= 30) & (t - T0 <= 80),

@@ -14,6 +14,7 @@ from estimator.evaluation import (
     match_summary,
     method_metrics,
 )
+from estimator.evaluation.metrics import horizontal_nees
 from estimator.log import GnssData, ImuData, Log, TruthData
 from estimator.matching import match_window, project_on_route
 from estimator.nav.frames import LocalFrame
@@ -43,6 +44,7 @@ def make_run(lateral, yaw, *, t=None, gnss_used=None, along=0.0, matches=()):
         velocity=np.zeros((n, 3)),
         attitude=att,
         position_sigma=np.ones((n, 3)),
+        position_cov_en=np.zeros(n),
         yaw_sigma=np.ones(n),
         gnss_used=used,
         degraded=degraded,
@@ -422,3 +424,34 @@ def test_an_outage_too_short_for_any_attempt_says_so():
     assert unattempted_notes(replace(still, method="baseline")) == []
     attempted = make_run(0.0, 0.0, matches=[SimpleNamespace(t=OUTAGE[0] + 5.0)])
     assert unattempted_notes(attempted) == []
+
+
+def test_the_nees_takes_the_ellipse_along_a_diagonal_road() -> None:
+    """An outage's ellipse is long along the road; on a road running north-east its E and N
+    sigmas are both the long one's. An error across the road of two cross sigmas is a NEES of
+    4 with the E-N covariance, and 0.08 without it (the error spread over the road's length)."""
+    along = np.array([1.0, 1.0]) / np.sqrt(2.0)
+    across = np.array([-along[1], along[0]])
+    cov = 10.0**2 * np.outer(along, along) + 1.0**2 * np.outer(across, across)
+    err = (2.0 * across)[None, :]
+    var_en = np.array([[cov[0, 0], cov[1, 1]]])
+    assert horizontal_nees(err, var_en, np.array([cov[0, 1]]))[0] == pytest.approx(4.0)
+    assert horizontal_nees(err, var_en, np.zeros(1))[0] == pytest.approx(8.0 / 101.0)
+
+
+@given(
+    st.floats(0.1, 100.0),
+    st.floats(0.1, 100.0),
+    st.floats(-0.99, 0.99),
+    st.floats(-50.0, 50.0),
+    st.floats(-50.0, 50.0),
+)
+@settings(max_examples=50, deadline=None)
+def test_the_nees_is_the_errors_mahalanobis_square(
+    sig_e: float, sig_n: float, rho: float, e: float, n: float
+) -> None:
+    cov = np.array([[sig_e**2, rho * sig_e * sig_n], [rho * sig_e * sig_n, sig_n**2]])
+    err = np.array([[e, n]])
+    expected = float(err[0] @ np.linalg.solve(cov, err[0]))
+    got = horizontal_nees(err, np.array([[sig_e**2, sig_n**2]]), np.array([cov[0, 1]]))[0]
+    assert got == pytest.approx(expected, rel=1e-6, abs=1e-9)

@@ -124,7 +124,7 @@ def test_an_alignment_without_wheel_speed_levels_with_the_tracks_acceleration() 
 def test_an_outage_from_the_logs_third_second_is_dead_reckoned_honestly() -> None:
     """GNSS removed 3 s after comma2k19's start, wheel speed left out: levelled through the
     car's acceleration, dead reckoning ran 125.6 m RMS off truth while claiming a sigma a
-    fifth of that (mean NEES 26.7); levelled with the track's acceleration 25.0 m, NEES 2.8."""
+    fifth of that (mean NEES 26.9); levelled with the track's acceleration 24.8 m, NEES 2.7."""
     inputs = open_inputs(COMMA, topics=TopicChoice(no_wheel=True))
     figures = {}
     for on in (True, False):

@@ -40,6 +40,7 @@ def _epochs(t, east):
         velocity=np.zeros((n, 3)),
         attitude=np.zeros((n, 3)),
         position_sigma=np.ones((n, 3)),
+        position_cov_en=np.zeros(n),
         yaw_sigma=np.zeros(n),
         gnss_used=np.zeros(n, bool),
         degraded=np.zeros(n, bool),

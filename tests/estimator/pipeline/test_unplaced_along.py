@@ -34,6 +34,7 @@ def _epochs(t, sigma):
         velocity=np.zeros((n, 3)),
         attitude=np.zeros((n, 3)),
         position_sigma=np.column_stack([sigma, np.zeros(n), np.zeros(n)]) / 1.0,
+        position_cov_en=np.zeros(n),
         yaw_sigma=np.zeros(n),
         gnss_used=np.zeros(n, bool),
         degraded=np.ones(n, bool),
