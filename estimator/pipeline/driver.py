@@ -52,6 +52,7 @@ from estimator.filter.layout import (
     E_SCALE,
     E_VEL,
     I_IMU,
+    O_COV_EN,
     O_DIST,
     O_DR,
     O_GNSS,
@@ -1354,7 +1355,7 @@ class Driver:
             return {}
         u0, u, normal = road.tangent_at(s0)[0], road.tangent_at(s1)[0], road.normal_at(s1)[0]
         z = road.point_at(s1)[0] + lane * normal
-        along_var = float(u0**2 @ before[O_SIG_POS : O_SIG_POS + 2] ** 2) + (
+        along_var = float(u0 @ row_position_cov(before) @ u0) + (
             float(f.P[E_SCALE, E_SCALE]) * travelled**2 if len(wheels) else GAP_VEL_VAR * span**2
         )
         cross_var = self.p.pseudo.cross_sigma_m**2
@@ -1428,8 +1429,7 @@ class Driver:
             dist = float(f.out[r.epoch, O_DIST])
             if r.t < since_t or dist < since_dist or r.accepted:
                 break
-            sigma = f.out[r.epoch, O_SIG_POS : O_SIG_POS + 2]
-            run.append(checked(r, np.diag(sigma**2), dist))
+            run.append(checked(r, row_position_cov(f.out[r.epoch]), dist))
         run.reverse()
         run.append(checked(rec, position_on_map_cov(f.P), float(f.aux[A_DIST])))
         return run
@@ -1471,7 +1471,13 @@ def dr_window(out: F64, n_out: int, x: F64, aux: F64, length_m: float) -> F64:
 
 def _track_cov(track: F64) -> F64:
     """The E/N covariance of the error a bias track's points share: the filter's at its end."""
-    cov: F64 = np.diag(track[-1, O_SIG_POS : O_SIG_POS + 2] ** 2)
+    return row_position_cov(track[-1])
+
+
+def row_position_cov(row: F64) -> F64:
+    """The E/N position covariance an output row holds (its sigmas and their covariance)."""
+    var_e, var_n = row[O_SIG_POS] ** 2, row[O_SIG_POS + 1] ** 2
+    cov: F64 = np.array([[var_e, row[O_COV_EN]], [row[O_COV_EN], var_n]])
     return cov
 
 
@@ -1617,7 +1623,12 @@ def along_drift_psd(rows: F64, t_a: float, t: float) -> float:
     moved = rows[i1, O_POS : O_POS + 2] - before[:, O_POS : O_POS + 2]
     dr = rows[i1, O_DR : O_DR + 2] - before[:, O_DR : O_DR + 2]
     c = np.sum((moved - dr) * u, axis=1)
-    s2 = np.sum((before[:, O_SIG_POS : O_SIG_POS + 2] * u) ** 2, axis=1)
+    # u' P u along the travel, with the E-N covariance
+    s2 = (
+        (before[:, O_SIG_POS] * u[:, 0]) ** 2
+        + (before[:, O_SIG_POS + 1] * u[:, 1]) ** 2
+        + 2.0 * before[:, O_COV_EN] * u[:, 0] * u[:, 1]
+    )
     tau = before[:, O_T] - t_a
     q = 3.0 * np.maximum(c * c - s2, 0.0) / np.maximum(tau, w) ** 3
     q[speed <= 1.0] = 0.0

@@ -130,6 +130,7 @@ def _epoch_rows(r: Run) -> list[list[Any]]:
                 f"{np.degrees(e.yaw_sigma[i]):.4f}",
                 int(e.gnss_used[i]),
                 int(e.degraded[i]),
+                f"{e.position_cov_en[i]:.6g}",
             ]
         )
     return rows
@@ -139,6 +140,7 @@ _CSV_HEADER = [
     "method", "t_s", "lat_deg", "lon_deg", "height_m", "east_m", "north_m", "up_m",
     "v_east_m_s", "v_north_m_s", "v_up_m_s", "roll_deg", "pitch_deg", "yaw_deg",
     "sigma_east_m", "sigma_north_m", "sigma_up_m", "sigma_yaw_deg", "gnss_used", "degraded",
+    "cov_east_north_m2",
 ]  # fmt: skip
 
 

@@ -224,8 +224,9 @@ def write_matches_csv(path: Path, run: Run) -> None:
 
 
 def write_trajectory_csv(path: Path, run: Run) -> None:
-    """Every epoch: times, ENU and geodetic position, velocity, attitude (deg), 1-sigma, and
-    whether GNSS was used / degraded."""
+    """Every epoch: times, ENU and geodetic position, velocity, attitude (deg), 1-sigma,
+    whether GNSS was used / degraded, and the E-N covariance (last: the sigmas alone draw an
+    outage's ellipse, long along a diagonal road, across it)."""
     ep = run.epochs
     geo = run.frame.to_geodetic(ep.position) if len(ep) else np.zeros((0, 3))
     cols = [
@@ -249,6 +250,7 @@ def write_trajectory_csv(path: Path, run: Run) -> None:
         ("sigma_yaw_deg", np.degrees(ep.yaw_sigma), "%.4f"),
         ("gnss_used", ep.gnss_used.astype(np.int64), "%d"),
         ("degraded", ep.degraded.astype(np.int64), "%d"),
+        ("cov_east_north_m2", ep.position_cov_en, "%.6g"),
     ]
     table = np.column_stack([np.asarray(c, np.float64) for _, c, _ in cols])
     np.savetxt(

@@ -102,6 +102,11 @@ def test_methods_and_csv(bag, tmp_path, capsys):
     assert 55 * 20 < len(rows) < 61 * 20 + 60
     assert {r["degraded"] for r in rows} == {"0", "1"}
     assert all(float(r["sigma_east_m"]) > 0 for r in rows)
+    assert all(
+        abs(float(r["cov_east_north_m2"]))
+        <= 1.001 * float(r["sigma_east_m"]) * float(r["sigma_north_m"])
+        for r in rows
+    )
 
 
 def test_parameters_reach_the_filter(bag, tmp_path):

@@ -339,6 +339,9 @@ def test_trajectory_csv_columns(exported):
     assert np.all(np.diff(data["time"]) >= 0)
     assert set(np.unique(data["degraded"])) <= {0.0, 1.0}
     assert data["degraded"].sum() > 0 and data["gnss_used"].sum() > 0
+    # the E-N covariance, last: a correlation within [-1, 1] (its 6 digits' rounding aside)
+    corr = data["cov_east_north_m2"] / (data["sigma_east_m"] * data["sigma_north_m"])
+    assert np.all(np.abs(corr) <= 1.001) and np.any(data["cov_east_north_m2"] != 0.0)
 
 
 def test_log_without_truth_as_ros1_bag(bag, tmp_path):
