@@ -339,9 +339,9 @@ class Epochs:
     position_sigma: F64
     """(N, 3) 1-sigma E, N, U, m"""
     position_cov_en: F64
-    """(N,) covariance of the E and N errors, m^2: with ``position_sigma`` the horizontal
-    ellipse, long along the road in an outage, which the sigmas alone draw across it wherever
-    the road runs diagonally"""
+    """(N,) covariance of the E and N errors, m^2. With ``position_sigma`` it is the horizontal
+    ellipse, long along the road in an outage: the sigmas alone cannot draw it where the road
+    runs diagonally"""
     yaw_sigma: F64
     """(N,) rad"""
     gnss_used: NDArray[np.bool_]

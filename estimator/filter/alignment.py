@@ -269,8 +269,9 @@ def _tilt(
     acc_x: float,
     acc_var: float = 0.0,
 ) -> tuple[float, float, float]:
-    """Roll, pitch and their sigma from the accelerometer over the last second; ``acc_var``:
-    the variance of ``acc_x`` where it was not measured (g times the tilt it hides)."""
+    """Roll, pitch and their sigma from the accelerometer over the last second. ``acc_var`` is
+    the variance of ``acc_x`` where the wheels did not measure it: an acceleration error a
+    levels the IMU a / g off, so the tilt's sigma grows by sqrt(acc_var) / g."""
     sel = (imu_t >= t0 - 1.0) & (imu_t <= t0)
     f = accel[sel].mean(axis=0) if sel.any() else accel[k0]
     w_z = float(gyro[sel, 2].mean()) if sel.any() else 0.0

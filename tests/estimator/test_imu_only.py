@@ -24,6 +24,7 @@ from estimator.pipeline.driver import (
     aided_approach_m,
     along_drift_psd,
     grow_along_velocity,
+    row_position_cov,
     window_scale_sigma,
 )
 from estimator.results import Gate
@@ -440,3 +441,25 @@ def test_a_correction_the_widened_search_found_is_not_capped_at_30_m() -> None:
     p = with_values(Params(), {"extensions.search_correction_cap": True})
     capped = gate_table(ShapeValues(40, 1.0, 0.1, 0.1), None, 70.0, p, search_m=180.0)[-1]
     assert capped.gate is Gate.CORRECTION_CAP and not capped.passed
+
+
+def test_the_along_track_sigma_of_a_diagonal_drive_is_the_ellipses_length() -> None:
+    """The drive above turned to run north-east, the filter's ellipse 20 m along the travel
+    and 2 m across: its E and N sigmas are both about 14 m. A 15 m correction along the travel
+    is within the 20 m the filter claims there, so no drift; read with the sigmas alone (the
+    E-N covariance dropped) the claim would be 14 m and the 15 m drift."""
+    along, across = np.array([1.0, 1.0]) / np.sqrt(2.0), np.array([-1.0, 1.0]) / np.sqrt(2.0)
+    cov = 20.0**2 * np.outer(along, along) + 2.0**2 * np.outer(across, across)
+    rows = _drifting_rows((0.0, 0.0), 0.0)
+    speed_t = rows[:, ly.O_DR].copy()
+    for i in range(2):
+        rows[:, ly.O_VEL + i] = 20.0 * along[i]
+        rows[:, ly.O_DR + i] = speed_t * along[i]
+        rows[:, ly.O_POS + i] = rows[:, ly.O_DR + i] - 15.0 * along[i] * (rows[:, ly.O_T] >= 39.5)
+    rows[:, ly.O_SIG_POS] = np.sqrt(cov[0, 0])
+    rows[:, ly.O_SIG_POS + 1] = np.sqrt(cov[1, 1])
+    rows[:, ly.O_COV_EN] = cov[0, 1]
+    np.testing.assert_allclose(row_position_cov(rows[0]), cov)
+    assert along_drift_psd(rows, 0.0, 60.0) == 0.0
+    rows[:, ly.O_COV_EN] = 0.0
+    assert along_drift_psd(rows, 0.0, 60.0) > 0.0
