@@ -136,3 +136,20 @@ def test_an_outage_from_the_logs_third_second_is_dead_reckoned_honestly() -> Non
         figures[on] = (float(np.sqrt(np.mean(np.sum(err**2, axis=1)))), float(nees.mean()))
     assert figures[True][0] < 40.0 and figures[True][1] < 4.0
     assert figures[False][0] > 80.0 and figures[False][1] > 10.0
+
+
+def test_a_broken_chord_gives_no_acceleration_rather_than_an_error() -> None:
+    """NaN in a fix or a heading, or every fix at one time, leave the alignment as without the
+    track's acceleration (and never a NaN in the state)."""
+    t = np.arange(0.0, 1.01, 0.1)
+    pos = np.column_stack([9.0 * t + 0.7 * t**2, np.zeros_like(t)])
+    heading = np.zeros_like(t)
+    bad_fix = pos.copy()
+    bad_fix[3, 0] = np.nan
+    bad_heading = heading.copy()
+    bad_heading[2] = np.nan
+    assert _track_accel(t, bad_fix, heading) == (0.0, 0.0)
+    assert _track_accel(t, pos, bad_heading) == (0.0, 0.0)
+    assert _track_accel(np.zeros_like(t), pos, heading) == (0.0, 0.0)
+    acc, var = _track_accel(t, pos, heading)
+    assert acc == pytest.approx(1.4) and var == pytest.approx(0.0, abs=1e-9)
