@@ -41,6 +41,9 @@ ACCEPTED = (30, 170, 60)
 REJECTED = (220, 40, 40)
 
 
+RING_POINTS = 72
+"""segments of a vehicle's covariance ring"""
+
 MATCH_MAX_AGE_S = 5.0
 """The current attempt stays drawn this long after its time (then the frame has no match)."""
 
@@ -235,6 +238,9 @@ class TrackLayer(Layer):
     z: ClassVar[float] = 0.1
     color: ClassVar[RGB] = PROPOSED
     length_m: ClassVar[float] = 6.0
+    ring: ClassVar[bool] = False
+    """draw the 95 % ellipse of the run's own covariance around its vehicle: where the truth
+    falls outside it, the filter claims more than it knows"""
 
     def _track(self, data: SceneData) -> Track | None:
         raise NotImplementedError
@@ -277,6 +283,11 @@ class TrackLayer(Layer):
                 ),
                 self._segments,
             )
+        if self.ring:
+            a = np.linspace(0.0, 2.0 * np.pi, RING_POINTS + 1)
+            circle = np.column_stack([np.cos(a), np.sin(a)])
+            self._lines("ring", polyline_segments(circle, 0.0), self.color, 1.5)
+            self._show("ring", False)  # placed and shown by draw
         self._show("line", track is not None)
         self._show("pose", track is not None)
         self._show("marker", track is not None)
@@ -297,6 +308,14 @@ class TrackLayer(Layer):
         h.position = (float(xy[0]), float(xy[1]), self.z + 0.3)
         h.wxyz = _yaw_wxyz(yaw)
         self._segments["marker"].position = (float(xy[0]), float(xy[1]), self.z + 0.25)
+        if self.ring:
+            axes = track.ring_at(t)
+            if axes is not None:
+                ring = self._segments["ring"]
+                ring.position = (float(xy[0]), float(xy[1]), self.z + 0.2)
+                ring.wxyz = _yaw_wxyz(axes[2])
+                ring.scale = (axes[0], axes[1], 1.0)
+            self._show("ring", axes is not None)
 
 
 class BaselineLayer(TrackLayer):
@@ -305,6 +324,7 @@ class BaselineLayer(TrackLayer):
     color = BASELINE
     legend = ((BASELINE, "baseline: GNSS/INS/odometer, dead reckoning in outages"),)
     z = 0.1
+    ring = True
 
     def _track(self, data: SceneData) -> Track | None:
         return data.baseline
@@ -314,8 +334,12 @@ class ProposedLayer(TrackLayer):
     key = "proposed"
     label = "proposed trajectory"
     color = PROPOSED
-    legend = ((PROPOSED, "proposed: with the route matches"),)
+    legend = (
+        (PROPOSED, "proposed: with the route matches"),
+        (PROPOSED, "ring round a vehicle: 95 % of where its run says it is"),
+    )
     z = 0.2
+    ring = True
 
     def _track(self, data: SceneData) -> Track | None:
         return data.proposed

@@ -111,6 +111,25 @@ def masked_segments(xy: F64, mask: NDArray[np.bool_], z: float = 0.0) -> NDArray
     return np.concatenate(out) if out else np.zeros((0, 2, 3), np.float32)
 
 
+RING_CHI2 = 5.991
+"""chi-square of 2 degrees of freedom at 95 %: the ring drawn around a run's vehicle"""
+
+
+def ellipse_axes(cov: F64, chi2: float) -> tuple[float, float, float] | None:
+    """Semi-axes (the larger first) and the larger's angle from East of the ellipse
+    e' P^-1 e = ``chi2`` for P = [[cov[0], cov[2]], [cov[2], cov[1]]]; None unless P is finite
+    and positive definite."""
+    var_e, var_n, c = (float(v) for v in cov)
+    if not (np.isfinite(var_e) and np.isfinite(var_n) and np.isfinite(c)):
+        return None
+    mid, half = 0.5 * (var_e + var_n), float(np.hypot(0.5 * (var_e - var_n), c))
+    big, small = mid + half, mid - half
+    if small <= 0.0:
+        return None
+    angle = 0.5 * float(np.arctan2(2.0 * c, var_e - var_n))
+    return float(np.sqrt(chi2 * big)), float(np.sqrt(chi2 * small)), angle
+
+
 @dataclass(frozen=True)
 class Track:
     """One run's trajectory: the full-rate poses for the vehicle marker, and the decimated
@@ -124,12 +143,15 @@ class Track:
     """(N,) ENU yaw, rad"""
     line: F64
     """(M, 2) decimated polyline for display"""
+    cov: F64 | None = None
+    """(N, 3) the filter's E and N variances and their covariance (m^2), None for the truth"""
 
     @classmethod
     def of_run(cls, run: Run) -> Track:
         ep = run.epochs
         xy = np.ascontiguousarray(ep.position[:, :2], np.float64)
-        return cls(t=ep.t, xy=xy, yaw=ep.attitude[:, 2], line=display_polyline(xy))
+        cov = np.column_stack([ep.position_sigma[:, :2] ** 2, ep.position_cov_en])
+        return cls(t=ep.t, xy=xy, yaw=ep.attitude[:, 2], line=display_polyline(xy), cov=cov)
 
     def index_at(self, t: float) -> int:
         return int(np.clip(np.searchsorted(self.t, t, side="right") - 1, 0, len(self.t) - 1))
@@ -138,6 +160,14 @@ class Track:
         """Position (2,) and yaw at the last epoch at or before ``t``."""
         i = self.index_at(t)
         return self.xy[i], float(self.yaw[i])
+
+    def ring_at(self, t: float) -> tuple[float, float, float] | None:
+        """The semi-axes (m) and the first axis's ENU angle (rad) of the ellipse holding 95 %
+        of where the filter says the vehicle is, at the last epoch at or before ``t``; None
+        without a covariance (the truth) or where it is not a proper one."""
+        if self.cov is None:
+            return None
+        return ellipse_axes(self.cov[self.index_at(t)], RING_CHI2)
 
 
 def _truth_track(log: Log | None, frame: LocalFrame) -> Track | None:

@@ -113,3 +113,29 @@ def test_a_turned_map_bias_draws_the_segment_turned_about_where_it_was_learned(v
     assert np.allclose(on_map - matched, expected, atol=1e-3)
     assert np.min(np.hypot(*(on_map - matched - offset).reshape(-1, 2).T)) > 50.0
     layers.remove()
+
+
+def test_a_runs_vehicle_carries_the_ring_of_its_own_covariance(viser_server):
+    """The proposed and baseline vehicles are ringed by the 95 % ellipse of their filter's
+    horizontal covariance (the fake runs claim 1 m in E and N, uncorrelated: a circle of
+    2.45 m); the truth has none."""
+    data = SceneData.build(
+        baseline=make_run(drift=30, method="baseline"),
+        proposed=make_run(),
+        route=make_route(),
+        log=None,
+    )
+    layers = SceneLayers(viser_server.scene, root="/ring")
+    layers.set_data(data)
+    ring = layers.layers["proposed"]._handles["ring"]
+    assert not ring.visible  # placed by the first frame
+    layers.draw(T0 + 10)
+    pose = layers.layers["proposed"]._handles["pose"]
+    assert ring.visible
+    np.testing.assert_allclose(np.array(ring.position)[:2], np.array(pose.position)[:2])
+    np.testing.assert_allclose(np.array(ring.scale)[:2], np.sqrt(5.991), rtol=1e-6)
+    assert "ring" in layers.layers["baseline"]._handles
+    assert "ring" not in layers.layers["truth"]._handles
+    layers.set_visible("proposed", False)
+    assert not ring.visible
+    layers.remove()

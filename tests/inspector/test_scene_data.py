@@ -5,9 +5,16 @@ from __future__ import annotations
 import itertools
 
 import numpy as np
+import pytest
 from fake_runs import T0, make_route, make_run
 
-from inspector.scene_data import SceneData, decimate_polyline, masked_segments
+from inspector.scene_data import (
+    RING_CHI2,
+    SceneData,
+    decimate_polyline,
+    ellipse_axes,
+    masked_segments,
+)
 
 
 def _max_deviation(xy: np.ndarray, kept: np.ndarray) -> float:
@@ -62,3 +69,15 @@ def test_scene_data_indexes_attempts_by_time():
     assert 900 < data.extent_m < 1200
     xy, _yaw = data.proposed.pose_at(T0 + 10)
     assert np.allclose(xy, prop.epochs.position[200, :2])
+
+
+def test_the_ring_is_the_ellipse_of_the_covariance_along_a_diagonal_road():
+    along = np.array([1.0, 1.0]) / np.sqrt(2.0)
+    across = np.array([-along[1], along[0]])
+    P = 10.0**2 * np.outer(along, along) + 1.0**2 * np.outer(across, across)
+    a, b, angle = ellipse_axes(np.array([P[0, 0], P[1, 1], P[0, 1]]), RING_CHI2)
+    assert a == pytest.approx(10.0 * np.sqrt(RING_CHI2))
+    assert b == pytest.approx(1.0 * np.sqrt(RING_CHI2))
+    assert angle == pytest.approx(np.pi / 4)
+    assert ellipse_axes(np.array([1.0, 1.0, 1.0]), RING_CHI2) is None  # singular
+    assert ellipse_axes(np.array([np.nan, 1.0, 0.0]), RING_CHI2) is None
