@@ -9,15 +9,21 @@ from inspector.layers import SceneLayers
 from inspector.scene_data import SceneData
 
 
-def test_draw_moves_the_vehicle_and_switches_the_match(viser_server):
+def _drifting_layers(viser_server, root: str) -> SceneLayers:
+    """The layers of a proposed run and a baseline 30 m off it, their data set."""
     data = SceneData.build(
         baseline=make_run(drift=30, method="baseline"),
         proposed=make_run(),
         route=make_route(),
         log=None,
     )
-    layers = SceneLayers(viser_server.scene, root="/test1")
+    layers = SceneLayers(viser_server.scene, root=root)
     layers.set_data(data)
+    return layers
+
+
+def test_draw_moves_the_vehicle_and_switches_the_match(viser_server):
+    layers = _drifting_layers(viser_server, "/test1")
     pose = layers.layers["proposed"]._handles["pose"]
     match = layers.layers["match"]
     layers.draw(T0 + 10)
@@ -119,14 +125,7 @@ def test_a_runs_vehicle_carries_the_ring_of_its_own_covariance(viser_server):
     """The proposed and baseline vehicles are ringed by the 95 % ellipse of their filter's
     horizontal covariance (the fake runs claim 1 m in E and N, uncorrelated: a circle of
     2.45 m); the truth has none."""
-    data = SceneData.build(
-        baseline=make_run(drift=30, method="baseline"),
-        proposed=make_run(),
-        route=make_route(),
-        log=None,
-    )
-    layers = SceneLayers(viser_server.scene, root="/ring")
-    layers.set_data(data)
+    layers = _drifting_layers(viser_server, "/ring")
     ring = layers.layers["proposed"]._handles["ring"]
     assert not ring.visible  # placed by the first frame
     layers.draw(T0 + 10)
