@@ -280,5 +280,6 @@ def _tilt(
     roll = math.atan2(up[1], up[2])
     pitch = math.atan2(up[0], math.hypot(up[1], up[2]))
     sig_tilt = math.radians(0.3 if still[sel].all() else 1.5)
-    sig_tilt = math.hypot(sig_tilt, math.sqrt(acc_var) / float(np.linalg.norm(f)))
+    if acc_var > 0.0:  # a dead accelerometer (all zeros) levels as before, without a division
+        sig_tilt = math.hypot(sig_tilt, math.sqrt(acc_var) / max(float(np.linalg.norm(f)), 1e-9))
     return roll, pitch, sig_tilt

@@ -12,7 +12,7 @@ import numpy as np
 import pytest
 
 from estimator.evaluation.metrics import method_metrics, outage_errors
-from estimator.filter.alignment import ACCEL_PRIOR_SIGMA_M_S2, _track_accel
+from estimator.filter.alignment import ACCEL_PRIOR_SIGMA_M_S2, _tilt, _track_accel
 from estimator.io import TopicChoice
 from estimator.params import Params, load_params, with_values
 from estimator.pipeline import open_inputs, run, run_methods
@@ -153,3 +153,16 @@ def test_a_broken_chord_gives_no_acceleration_rather_than_an_error() -> None:
     assert _track_accel(np.zeros_like(t), pos, heading) == (0.0, 0.0)
     acc, var = _track_accel(t, pos, heading)
     assert acc == pytest.approx(1.4) and var == pytest.approx(0.0, abs=1e-9)
+
+
+def test_a_dead_accelerometer_is_levelled_without_a_division_by_its_zero() -> None:
+    """An accelerometer reading zeros over the alignment's second (a dead sensor) was levelled
+    flat with its 1.5 deg sigma; the track's acceleration must not turn that into a
+    ZeroDivisionError (it did, between 2d65fb6 and this test)."""
+    t = np.arange(0.0, 2.0, 0.01)
+    zeros = np.zeros((len(t), 3))
+    moving = np.zeros(len(t), bool)
+    roll, pitch, sigma = _tilt(t, zeros, zeros, moving, 1.5, 150, 10.0, 0.0, 0.0)
+    assert (roll, pitch) == (0.0, 0.0) and sigma == pytest.approx(np.radians(1.5))
+    *_, sigma = _tilt(t, zeros, zeros, moving, 1.5, 150, 10.0, 0.5, 0.01)
+    assert np.isfinite(sigma) and sigma > np.radians(1.5)
