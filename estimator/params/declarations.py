@@ -918,8 +918,8 @@ class NoiseParams:
         "by an angle the config does not give sees speed x sin(angle) across and up, and a "
         "constraint that calls that zero within noise.nhc_sigma_m_s holds the pitch on its "
         "own flight path while the accelerometer bias takes the gravity, confident and wrong "
-        "in the outages after (comma2k19 without its 3.8 deg mount, no wheels, 20-50 s: 58 m "
-        "off, NEES 36; with 2 deg here 16 m, NEES 1.5). 0: off, as the simulated drives need "
+        "in the outages after (comma2k19 without its 3.8 deg mount, no wheels, 20-50 s: 33 m "
+        "RMS off, NEES 17; with 2 deg here 15 m, NEES 1.3). 0: off, as the simulated drives need "
         "it (their gyros, 300-700 deg/h off, are held by the tight constraint: with 2 deg "
         "the IMU-only sims' dead reckoning is worse on 22 of 29); set it for a real vehicle "
         "whose mount is not given (the accelerometer-bias warning)",
