@@ -13,6 +13,7 @@ import numba
 import numpy as np
 from numpy.typing import NDArray
 
+from estimator.evaluation.metrics import NEES_95_2DOF
 from estimator.log import Log
 from estimator.nav.frames import LocalFrame
 from estimator.results import MatchRecord, Run
@@ -111,10 +112,6 @@ def masked_segments(xy: F64, mask: NDArray[np.bool_], z: float = 0.0) -> NDArray
     return np.concatenate(out) if out else np.zeros((0, 2, 3), np.float32)
 
 
-RING_CHI2 = 5.991
-"""chi-square of 2 degrees of freedom at 95 %: the ring drawn around a run's vehicle"""
-
-
 def ellipse_axes(cov: F64, chi2: float) -> tuple[float, float, float] | None:
     """Semi-axes (the larger first) and the larger's angle from East of the ellipse
     e' P^-1 e = ``chi2`` for P = [[cov[0], cov[2]], [cov[2], cov[1]]]; None unless P is finite
@@ -167,7 +164,7 @@ class Track:
         without a covariance (the truth) or where it is not a proper one."""
         if self.cov is None:
             return None
-        return ellipse_axes(self.cov[self.index_at(t)], RING_CHI2)
+        return ellipse_axes(self.cov[self.index_at(t)], NEES_95_2DOF)
 
 
 def _truth_track(log: Log | None, frame: LocalFrame) -> Track | None:

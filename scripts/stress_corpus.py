@@ -41,7 +41,6 @@ RUNS: dict[str, tuple[str, dict[str, Any], bool]] = {
 }
 """label: (method, parameters, whether the map draws the road as driven instead of the biased
 map: the control that separates the map's bias from the method, :meth:`Drive.on_the_road`)"""
-CHI2_2DOF_95 = 5.991
 MARK = "<!-- stress_corpus.py: {} -->"
 
 
@@ -49,7 +48,7 @@ def run_drive(index: int, corpus: int = 0) -> dict[str, Any]:
     """One corpus drive's row (runs in a Dask worker)."""
     import numpy as np
 
-    from estimator.evaluation.metrics import method_metrics, outage_errors
+    from estimator.evaluation.metrics import NEES_95_2DOF, method_metrics, outage_errors
     from estimator.params import Params, with_values
     from estimator.pipeline import run_methods
     from estimator.sim.stress import build, drive_spec
@@ -89,7 +88,7 @@ def run_drive(index: int, corpus: int = 0) -> dict[str, Any]:
             row[f"{label}_route_rmse_m"] = round(metrics.route.rmse_pos_dev_m or 0.0, 3)
             row[f"{label}_nees_mean"] = round(float(nees.mean()), 2) if len(nees) else None
             row[f"{label}_nees_over_95"] = (
-                round(float(np.mean(nees > CHI2_2DOF_95)), 3) if len(nees) else None
+                round(float(np.mean(nees > NEES_95_2DOF)), 3) if len(nees) else None
             )
             row[f"{label}_accepted"] = sum(m.accepted for m in run.matches)
             row[f"{label}_attempted"] = len(run.matches)

@@ -136,6 +136,11 @@ def outage_errors(run: Run, log: Log, frame: LocalFrame) -> tuple[F64, F64]:
     return err, horizontal_nees(err, e.position_sigma[sel, :2] ** 2, e.position_cov_en[sel])
 
 
+NEES_95_2DOF = 5.991
+"""the chi-square of 2 degrees of freedom at 95 %: a horizontal NEES exceeds it on 5 % of epochs
+when the covariance is honest (and the ellipse it bounds holds 95 % of the errors)"""
+
+
 def horizontal_nees(err: F64, var_en: F64, cov_en: F64) -> F64:
     """e' P^-1 e per row for the errors ``err`` ((N, 2) E, N) under P = [[var_e, cov], [cov,
     var_n]]; a row whose P is not positive definite (rounding) is taken without its cov."""

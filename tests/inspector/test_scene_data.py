@@ -8,8 +8,8 @@ import numpy as np
 import pytest
 from fake_runs import T0, make_route, make_run
 
+from estimator.evaluation.metrics import NEES_95_2DOF
 from inspector.scene_data import (
-    RING_CHI2,
     SceneData,
     decimate_polyline,
     ellipse_axes,
@@ -75,9 +75,9 @@ def test_the_ring_is_the_ellipse_of_the_covariance_along_a_diagonal_road():
     along = np.array([1.0, 1.0]) / np.sqrt(2.0)
     across = np.array([-along[1], along[0]])
     P = 10.0**2 * np.outer(along, along) + 1.0**2 * np.outer(across, across)
-    a, b, angle = ellipse_axes(np.array([P[0, 0], P[1, 1], P[0, 1]]), RING_CHI2)
-    assert a == pytest.approx(10.0 * np.sqrt(RING_CHI2))
-    assert b == pytest.approx(1.0 * np.sqrt(RING_CHI2))
+    a, b, angle = ellipse_axes(np.array([P[0, 0], P[1, 1], P[0, 1]]), NEES_95_2DOF)
+    assert a == pytest.approx(10.0 * np.sqrt(NEES_95_2DOF))
+    assert b == pytest.approx(1.0 * np.sqrt(NEES_95_2DOF))
     assert angle == pytest.approx(np.pi / 4)
-    assert ellipse_axes(np.array([1.0, 1.0, 1.0]), RING_CHI2) is None  # singular
-    assert ellipse_axes(np.array([np.nan, 1.0, 0.0]), RING_CHI2) is None
+    assert ellipse_axes(np.array([1.0, 1.0, 1.0]), NEES_95_2DOF) is None  # singular
+    assert ellipse_axes(np.array([np.nan, 1.0, 0.0]), NEES_95_2DOF) is None
