@@ -78,18 +78,26 @@ def align(
     k0 = max(k0, 0)
     t0 = float(imu_t[k0])
     acc = acc_var = 0.0
+    unlevelled: F64 | None = None
     if speed is not None and p.extensions.align_track_accel and not _wheels_cover(t0, wheel_t):
         chord_t = gnss_t[i : j + 1]
         headings = yaw - (np.interp(t_fix, imu_t, cum_yaw) - np.interp(chord_t, imu_t, cum_yaw))
-        acc, acc_var = _track_accel(chord_t, gnss_pos[i : j + 1, :2], headings)
-        speed += acc * 0.5 * float(gnss_t[j] - gnss_t[i])  # the chord's mean is at its middle
+        told = _track_accel(chord_t, gnss_pos[i : j + 1, :2], headings)
+        if told is None:
+            unlevelled = chord_t
+        else:
+            acc, acc_var = told
+            speed += acc * 0.5 * float(gnss_t[j] - gnss_t[i])  # the chord's mean is at its middle
     speed, acc_x = _speed_at(t0, wheel_t, wheel_v, speed, acc)
     if still[k0] and abs(speed) < 1.0:
         # without wheel speed the IMU-only stillness test also fires on a smooth cruise; a GNSS
         # chord that moved says otherwise
         speed = 0.0
         acc_x = acc_var = 0.0
+        unlevelled = None
     roll, pitch, sig_tilt = _tilt(imu_t, gyro, accel, still, t0, k0, speed, acc_x, acc_var)
+    if unlevelled is not None:
+        notes += (_unlevelled_note(unlevelled, float(gnss_t[use[0]]), sig_tilt),)
     q = euler_to_quat(roll, pitch, yaw)
     C = np.empty((3, 3))
     quat_to_dcm(q, C)
@@ -211,7 +219,7 @@ def _wheels_cover(t0: float, wheel_t: F64) -> bool:
     return len(wheel_t) > 1 and wheel_t[0] <= t0 + 0.5 and wheel_t[-1] >= t0 - 0.5
 
 
-def _track_accel(t: F64, pos: F64, headings: F64) -> tuple[float, float]:
+def _track_accel(t: F64, pos: F64, headings: F64) -> tuple[float, float] | None:
     """The along-track acceleration of the GNSS fixes ``t``, ``pos`` (the aligning chord, the
     vehicle's yaw at each in ``headings``) and its variance: a parabola's through the distance
     along the track, weighed against :data:`ACCEL_PRIOR_SIGMA_M_S2`. Each step between fixes
@@ -223,23 +231,39 @@ def _track_accel(t: F64, pos: F64, headings: F64) -> tuple[float, float]:
     common to fixes a second apart, and the track's shape is far better than its place.
 
     Where the fixes cannot tell it (fewer than six, or a parabola less sure than the prior)
-    it is (0, 0), the alignment as without it: a tilt widened to the prior's 6 deg lets the
-    non-holonomic constraint turn an IMU mounted tilted towards the velocity within the
-    first seconds (IMU-only sim 4, GNSS lost 3 s in: 117 -> 338 m)."""
+    it is None, the alignment as without it (and a warning says so): a tilt widened to the
+    prior's 6 deg lets the non-holonomic constraint turn an IMU mounted tilted towards the
+    velocity within the first seconds (IMU-only sim 4, GNSS lost 3 s in: 117 -> 338 m)."""
     mid = 0.5 * (headings[1:] + headings[:-1])
     steps = np.diff(pos, axis=0)
     s = np.r_[0.0, np.cumsum(steps[:, 0] * np.cos(mid) + steps[:, 1] * np.sin(mid))]
     dt = t - t[-1]
     prior = ACCEL_PRIOR_SIGMA_M_S2**2
     if len(t) < 6 or float(np.ptp(dt)) < 0.5:
-        return 0.0, 0.0
+        return None
     coef, cov = np.polyfit(dt, s, 2, cov=True)
     fit, fit_var = 2.0 * float(coef[0]), 4.0 * float(cov[0, 0])
     if not (math.isfinite(fit) and fit_var < prior):
-        return 0.0, 0.0
+        return None
     # a Gaussian product: prior N(0, prior), fit N(fit, fit_var)
     gain = prior / (prior + fit_var)
     return gain * fit, (1.0 - gain) * prior
+
+
+def _unlevelled_note(chord_t: F64, t_first: float, sig_tilt: float) -> str:
+    """The warning for an alignment in motion levelled as if the car held its speed: no
+    wheel speed, and too few fixes on the aligning chord (a 1-5 Hz receiver) or too much
+    scatter for :func:`_track_accel` to tell its acceleration. An acceleration a levels roll
+    or pitch a / g off (0.58 deg per 0.1 m/s^2) under the tilt sigma ``sig_tilt`` the
+    alignment claims, and a tilt error is dead reckoning's fastest-growing one."""
+    return (
+        f"initial alignment at {chord_t[-1] - t_first:.1f} s after the first GNSS fix levelled "
+        "as if the vehicle held its speed: no wheel speed, and the "
+        f"{len(chord_t)} fixes over {float(np.ptp(chord_t)):.1f} s of its aligning chord "
+        "cannot tell its acceleration (each 0.1 m/s^2 tilts roll or pitch 0.6 deg, against "
+        f"the {math.degrees(sig_tilt):.1f} deg the alignment claims); start the log at "
+        "standstill or give it wheel speed"
+    )
 
 
 def _speed_at(

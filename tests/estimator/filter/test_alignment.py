@@ -65,6 +65,12 @@ def test_bad_first_fixes_neither_turn_the_heading_nor_go_unsaid(
         assert all(f"{metres:.0f} m off" in w or f"{metres + 1:.0f} m off" in w for w in left_out)
 
 
+def _told(t: np.ndarray, pos: np.ndarray, heading: np.ndarray) -> tuple[float, float]:
+    told = _track_accel(t, pos, heading)
+    assert told is not None
+    return told
+
+
 def test_the_tracks_acceleration_is_the_parabolas_where_the_fixes_tell_it() -> None:
     t = np.arange(0.0, 1.01, 0.1)
     yaw = np.radians(30.0)
@@ -72,18 +78,18 @@ def test_the_tracks_acceleration_is_the_parabolas_where_the_fixes_tell_it() -> N
     pos = np.column_stack([np.cos(yaw) * along, np.sin(yaw) * along])
     noise = np.random.default_rng(3).normal(0.0, 0.005, pos.shape)
     heading = np.full_like(t, yaw)
-    acc, var = _track_accel(t, pos + noise, heading)
+    acc, var = _told(t, pos + noise, heading)
     assert acc == pytest.approx(1.4, abs=0.1)
     assert var < 0.01 * ACCEL_PRIOR_SIGMA_M_S2**2
     # scattered by 10 cm the fit is still surer than the prior, which pulls it in a little
     fair = pos + np.random.default_rng(5).normal(0.0, 0.1, pos.shape)
-    acc, var = _track_accel(t, fair, heading)
+    acc, var = _told(t, fair, heading)
     assert 0.0 < var < 0.5 * ACCEL_PRIOR_SIGMA_M_S2**2 and abs(acc - 1.4) < 3 * np.sqrt(var) + 0.1
     # scattered by a metre, or too few for a parabola and its scatter, they tell nothing: the
     # alignment levels as without them (no acceleration, its tilt sigma not widened)
     noisy = pos + np.random.default_rng(4).normal(0.0, 1.0, pos.shape)
-    assert _track_accel(t, noisy, heading) == (0.0, 0.0)
-    assert _track_accel(t[:5], pos[:5], heading[:5]) == (0.0, 0.0)
+    assert _track_accel(t, noisy, heading) is None
+    assert _track_accel(t[:5], pos[:5], heading[:5]) is None
 
 
 def test_a_turning_chord_at_a_steady_speed_has_no_track_acceleration() -> None:
@@ -94,9 +100,9 @@ def test_a_turning_chord_at_a_steady_speed_has_no_track_acceleration() -> None:
     yaw = np.radians(30.0) * t
     radius = 10.0 / np.radians(30.0)
     pos = np.column_stack([radius * np.sin(yaw), radius * (1.0 - np.cos(yaw))])
-    acc, _ = _track_accel(t, pos, yaw)
+    acc, _ = _told(t, pos, yaw)
     assert abs(acc) < 0.02
-    acc, _ = _track_accel(t, pos, np.full_like(t, yaw[-1]))
+    acc, _ = _told(t, pos, np.full_like(t, yaw[-1]))
     assert acc > 1.0
 
 
@@ -148,10 +154,10 @@ def test_a_broken_chord_gives_no_acceleration_rather_than_an_error() -> None:
     bad_fix[3, 0] = np.nan
     bad_heading = heading.copy()
     bad_heading[2] = np.nan
-    assert _track_accel(t, bad_fix, heading) == (0.0, 0.0)
-    assert _track_accel(t, pos, bad_heading) == (0.0, 0.0)
-    assert _track_accel(np.zeros_like(t), pos, heading) == (0.0, 0.0)
-    acc, var = _track_accel(t, pos, heading)
+    assert _track_accel(t, bad_fix, heading) is None
+    assert _track_accel(t, pos, bad_heading) is None
+    assert _track_accel(np.zeros_like(t), pos, heading) is None
+    acc, var = _told(t, pos, heading)
     assert acc == pytest.approx(1.4) and var == pytest.approx(0.0, abs=1e-9)
 
 
@@ -166,3 +172,28 @@ def test_a_dead_accelerometer_is_levelled_without_a_division_by_its_zero() -> No
     assert (roll, pitch) == (0.0, 0.0) and sigma == pytest.approx(np.radians(1.5))
     *_, sigma = _tilt(t, zeros, zeros, moving, 1.5, 150, 10.0, 0.5, 0.01)
     assert np.isfinite(sigma) and sigma > np.radians(1.5)
+
+
+def _alignment_warnings(inputs: Inputs, params: Params) -> list[str]:
+    r = run(inputs.log, None, params, method="baseline", frame=inputs.frame)
+    return [w for w in r.warnings if w.startswith("initial alignment")]
+
+
+def test_an_alignment_that_cannot_tell_the_cars_acceleration_says_so() -> None:
+    """A 5-10 Hz receiver gives a one-second chord five or six fixes, too few for the track's
+    parabola; without wheel speed the alignment then levels as if the car held its speed, and
+    the run's warnings say where, from how many fixes, and what tilt sigma it claimed. With
+    wheel speed (or where the fixes tell the acceleration) nothing is said."""
+    path = SAMPLES / "monaco_tunnel.mcap"
+    wheel_less = open_inputs(path, topics=TopicChoice(no_wheel=True))
+    (said,) = _alignment_warnings(wheel_less, Params())
+    assert "no wheel speed" in said and "fixes over" in said and "deg the alignment claims" in said
+    assert _alignment_warnings(open_inputs(path), Params()) == []
+    off = with_values(Params(), {"extensions.align_track_accel": False})
+    assert _alignment_warnings(wheel_less, off) == []
+
+
+@needs_comma
+def test_a_ten_hertz_track_that_tells_the_acceleration_draws_no_warning() -> None:
+    inputs = open_inputs(COMMA, topics=TopicChoice(no_wheel=True))
+    assert _alignment_warnings(inputs, load_params(COMMA_CONFIG)) == []
