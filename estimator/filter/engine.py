@@ -191,6 +191,19 @@ class Filter:
         self.aux[A_USED_DIST] = self.aux[A_DIST]
 
 
+def row_position_cov(rows: F64) -> F64:
+    """The E/N position covariance output rows hold (their sigmas and the E-N term): (2, 2)
+    for one row, (N, 2, 2) for rows. The ellipse's tilt is in the E-N term; the sigmas
+    alone would test an error along a diagonal road against the wrong axes."""
+    var_e, var_n, cov_en = (
+        rows[..., O_SIG_POS] ** 2,
+        rows[..., O_SIG_POS + 1] ** 2,
+        rows[..., O_COV_EN],
+    )
+    cov: F64 = np.stack([np.stack([var_e, cov_en], -1), np.stack([cov_en, var_n], -1)], -2)
+    return cov
+
+
 def epochs_of(out: F64, n: int, degraded: tuple[tuple[float, float], ...]) -> Epochs:
     """The public per-epoch results of the first ``n`` output rows."""
     o = out[:n]

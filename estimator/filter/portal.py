@@ -14,7 +14,7 @@ from __future__ import annotations
 import numpy as np
 from numpy.typing import NDArray
 
-from estimator.filter.engine import Filter, FilterState
+from estimator.filter.engine import Filter, FilterState, row_position_cov
 from estimator.filter.kernel import run_until, write_row
 from estimator.filter.layout import (
     A_NEXT_OUT,
@@ -35,7 +35,6 @@ from estimator.filter.layout import (
     O_DIST,
     O_POS,
     O_RPY,
-    O_SIG_POS,
     O_T,
     STATUS_DONE,
     X_GW,
@@ -115,8 +114,9 @@ def disagreeing_fixes(
 
     Each fix's offset from the dead-reckoned antenna position (plus the GNSS wander state) is
     tested twice, with the chi-square (2 dof) gate ``noise.gnss_chi2_gate``. Against the
-    filter: the saved E/N covariance of position + wander, the growth of the position variance
-    while dead-reckoning, and the log's *typical* white fix variance (not the one the fix
+    filter: the saved E/N covariance of position + wander, the growth of the position covariance
+    while dead-reckoning (its E-N term too: along a diagonal road the growth is an ellipse
+    along the road), and the log's *typical* white fix variance (not the one the fix
     reports: portal fixes claim metre-level sigmas for jumps of 5-15 m). Against the other
     fixes: over a few seconds dead reckoning drifts by centimetres, so good fixes share one
     offset (the filter's error) up to their white noise and the wander's change, and a jump
@@ -142,8 +142,9 @@ def disagreeing_fixes(
     gw0 = saved[0][X_GW : X_GW + 2]
     gw = gw0[None, :] * np.exp(-(tf - t_save) / cfg[C_TAU_W])[:, None]
     d = inp.gnss_pos[g, :2] - (pos + lever_en + gw)
-    sig2 = np.column_stack([np.interp(tf, t_r, r[:, O_SIG_POS + i] ** 2) for i in range(2)])
-    growth = np.maximum(sig2 - r[0, O_SIG_POS : O_SIG_POS + 2] ** 2, 0.0)
+    cov_r = row_position_cov(r).reshape(-1, 4)
+    cov_f = np.column_stack([np.interp(tf, t_r, cov_r[:, i]) for i in range(4)])
+    growth = (cov_f - cov_r[0]).reshape(-1, 2, 2)
     white = cfg[C_WHITE_VAR]
     gate = cfg[C_GNSS_GATE]
     pe, pw = slice(E_POS, E_POS + 2), slice(E_GW, E_GW + 2)
@@ -151,7 +152,7 @@ def disagreeing_fixes(
     S0 = P0[pe, pe] + P0[pw, pw] + P0[pe, pw] + P0[pw, pe]
     bad = np.zeros(len(g), bool)
     for k in range(len(g)):
-        S = S0 + np.diag(growth[k] + white)
+        S = S0 + growth[k] + white * np.eye(2)
         bad[k] = float(d[k] @ np.linalg.solve(S, d[k])) > gate
     # the fixes among themselves: two white noises, the wander's change over the lag, and
     # what a heading or odometer-scale error turns the distance driven into

@@ -30,7 +30,7 @@ from numpy.typing import NDArray
 from estimator.errors import LogError, RoutefuseError
 from estimator.evaluation.metrics import interval_mask
 from estimator.filter.alignment import MG
-from estimator.filter.engine import Filter, epochs_of
+from estimator.filter.engine import Filter, epochs_of, row_position_cov
 from estimator.filter.gnss import widen_heading
 from estimator.filter.kernel import GAP_VEL_VAR, IMU_GAP_S, finite_state, wheel_distance
 from estimator.filter.layout import (
@@ -1472,13 +1472,6 @@ def dr_window(out: F64, n_out: int, x: F64, aux: F64, length_m: float) -> F64:
 def _track_cov(track: F64) -> F64:
     """The E/N covariance of the error a bias track's points share: the filter's at its end."""
     return row_position_cov(track[-1])
-
-
-def row_position_cov(row: F64) -> F64:
-    """The E/N position covariance an output row holds (its sigmas and their covariance)."""
-    var_e, var_n = row[O_SIG_POS] ** 2, row[O_SIG_POS + 1] ** 2
-    cov: F64 = np.array([[var_e, row[O_COV_EN]], [row[O_COV_EN], var_n]])
-    return cov
 
 
 def _track_var(track: F64) -> F64:
