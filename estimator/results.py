@@ -241,7 +241,8 @@ class MatchRecord:
     pseudo_position: F64
     """(2,) z = p_ref + offset"""
     obs_cov: F64
-    """(2, 2) observation covariance R_k"""
+    """(2, 2) observation covariance R_k (of an accepted attempt, as applied: widened along the
+    road by ``extensions.overlap_inflation`` after the gates)"""
     innovation: F64
     """(2,) z - H x before the update"""
     correction: F64
@@ -261,6 +262,15 @@ class MatchRecord:
     (``extensions.reanchor``); the filter's covariance was widened to the innovation first"""
     extra: dict[str, float] = field(default_factory=dict)
     """free-form scalars for display (candidate validation's chi-square and costs, ...)"""
+    filter_cov: F64 = field(default_factory=lambda: np.full((2, 2), np.nan))
+    """(2, 2) m^2: the filter's E-N covariance of the position relative to the route at the
+    attempt, before the update: H P H^T with H = [I, I] over the position and map-bias error
+    states (the position's own E-N block where the run carries no map bias). It is what the
+    Mahalanobis gate adds to ``obs_cov``, S = filter_cov + R_k, so a refusal can be told apart
+    as an overconfident filter or an overconfident fit; the :class:`Epochs` row at ``epoch`` is
+    written after the update (the posterior where accepted). A re-anchored attempt's filter was
+    widened after this, before its update. NaN where nothing filled it in (records built
+    outside the pipeline)"""
 
     @property
     def failed_gates(self) -> tuple[GateDecision, ...]:
@@ -284,10 +294,27 @@ class MatchRecord:
         """(2,) unit route normal at the pseudo-position (NaN without a fit)."""
         return np.full(2, np.nan) if self.fit is None else self.fit.normal
 
+    @property
+    def tangent(self) -> F64:
+        """(2,) unit route direction at the pseudo-position, the normal turned right (NaN
+        without a fit)."""
+        n = self.normal
+        return np.array([n[1], -n[0]])
+
+    def route_sigmas(self, cov: F64) -> F64:
+        """(2,) 1-sigma along and across the route (:attr:`tangent`, :attr:`normal`) of an E-N
+        covariance such as ``obs_cov`` or ``filter_cov``, m (NaN without a fit): the axes the
+        fit observes differently, where E and N mix them wherever the road runs diagonally."""
+        c = np.asarray(cov, np.float64)
+        axes = np.stack([self.tangent, self.normal])
+        sigmas: F64 = np.sqrt(np.einsum("ai,ij,aj->a", axes, c, axes))
+        return sigmas
+
     def diagnostics(self) -> dict[str, float]:
         """Every scalar of the attempt beyond the fixed fields, by name, in a stable order
         (the export's ``extra_*`` columns, the match panel's rows); unknown (NaN) anchor and
-        window length are left out."""
+        window length are left out, as is the filter's sigma where no fit gives it axes or
+        nothing filled in ``filter_cov``."""
         out = {
             k: v
             for k, v in (("anchor_s", self.anchor_s), ("window_length_m", self.window_length_m))
@@ -295,6 +322,10 @@ class MatchRecord:
         }
         if self.fit is not None:
             out.update(self.fit.diagnostics())
+            if np.all(np.isfinite(self.filter_cov)):
+                along, cross = self.route_sigmas(self.filter_cov)
+                out["filter_along_sigma_m"] = float(along)
+                out["filter_cross_sigma_m"] = float(cross)
         out.update(self.extra)
         if self.long_window is not None:
             out["long_window"] = 1.0

@@ -82,8 +82,10 @@ MAHALANOBIS = GateSpec(
     Gate.MAHALANOBIS,
     "<=",
     lambda g: g.mahalanobis_chi2,
-    "innovation chi-square, S = P_EN + R_k",
+    "innovation chi-square, S = P_EN + R_k (P_EN with the map-bias error where carried)",
 )
+"""S = H P H^T + R_k with H = [I, I] over the position and map-bias error states: the record's
+``filter_cov`` plus its ``obs_cov`` (:func:`~estimator.matching.fit.mahalanobis2`)"""
 LANE_CONTINUITY = GateSpec(
     Gate.LANE_CONTINUITY,
     "<=",

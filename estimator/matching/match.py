@@ -76,6 +76,8 @@ class MatchGeometry:
     win: F64
     p_dr: F64
     cov: F64
+    """(2, 2) the filter's position covariance the attempt was made with, symmetrised: what
+    the Mahalanobis gate adds to the fit's observation covariance"""
     lane: float
     lane_path: bool
     s_anchor: float
@@ -316,7 +318,9 @@ def judge_match(
     geometry: MatchGeometry, params: Params, *, index: int, t: float, epoch: int
 ) -> MatchRecord:
     """The gates of one attempt on its geometry (computed with the same
-    :func:`geometry_params`): the record :func:`match_window` returns."""
+    :func:`geometry_params`): the record :func:`match_window` returns. Its ``filter_cov`` is
+    the position covariance the geometry was computed with, the one the Mahalanobis gate adds
+    to the fit's ``obs_cov``."""
     win, p, lane = geometry.win, geometry.p_dr, geometry.lane
     fit, sc = geometry.fit, geometry.scores
     if fit is None or sc is None:
@@ -345,6 +349,7 @@ def judge_match(
             correction=np.zeros(2),
             anchor_s=geometry.s_anchor,
             window_length_m=geometry.span,
+            filter_cov=geometry.cov,
         )
     gates = gate_table(sc.shape, sc.validation, sc.correction, params, search_m=sc.search_m)
     return MatchRecord(
@@ -373,4 +378,5 @@ def judge_match(
         window_length_m=geometry.span,
         fit=sc.summary,
         extra=dict(sc.extra),
+        filter_cov=geometry.cov,
     )

@@ -157,7 +157,8 @@ class GateParams:
     )
     mahalanobis_chi2: float = param(
         13.8,
-        "chi-square gate on the match innovation, S = P_EN + R_k (2 dof; 13.8 = 99.9 %)",
+        "chi-square gate on the match innovation, S = P_EN + R_k (P_EN with the map-bias error "
+        "where carried; 2 dof; 13.8 = 99.9 %)",
         lo=1,
         hi=1000,
         step=0.5,

@@ -84,6 +84,32 @@ def _vec(v: Any, digits: int = 2) -> str:
     return "(" + ", ".join(f"{x:.{digits}f}" for x in a) + ")"
 
 
+ROUTE_AXES_SHOWN = ("filter_along_sigma_m", "filter_cross_sigma_m")
+"""diagnostics the route-axes table shows, left out of the rows of the rest"""
+
+
+def route_axes_rows(m: MatchRecord) -> list[str]:
+    """The innovation beside the two sigmas the Mahalanobis gate adds, S = filter_cov +
+    obs_cov, along and across the route (+ left), in metres: whether a refusal came from a
+    filter sure of a position it drifted from or from a fit claiming more than its shape
+    shows. The filter's is before the update (the epoch row after it is the posterior), the
+    position relative to the route (its map-bias error added where the run carries one).
+    Nothing without a fit (no route direction)."""
+    if m.fit is None:
+        return []
+    nu = np.asarray(m.innovation, np.float64)
+    along, across = float(m.tangent @ nu), float(m.normal @ nu)
+    f_along, f_across = m.route_sigmas(m.filter_cov)
+    o_along, o_across = m.route_sigmas(m.obs_cov)
+    return [
+        "| route axes, m | along | across (+ left) |",
+        "|---|---:|---:|",
+        f"| innovation | {_fmt(along, 2)} | {_fmt(across, 2)} |",
+        f"| filter 1-sigma, before the update | {_fmt(f_along, 2)} | {_fmt(f_across, 2)} |",
+        f"| observation 1-sigma | {_fmt(o_along, 2)} | {_fmt(o_across, 2)} |",
+    ]
+
+
 def match_markdown(
     m: MatchRecord | None,
     *,
@@ -141,6 +167,9 @@ def match_markdown(
         note = HEADING_NOTE if g.gate is Gate.HEADING and value.endswith("°") else g.note
         if note:
             notes.append(f"*{g.name}*: {note}")
+    axes = route_axes_rows(m)
+    if axes:
+        lines += ["", *axes]
     corr = np.asarray(m.correction, np.float64).reshape(-1)
     corr_norm = float(np.hypot(*corr)) if corr.size == 2 and np.all(np.isfinite(corr)) else np.nan
     cov = np.asarray(m.obs_cov, np.float64)
@@ -161,7 +190,11 @@ def match_markdown(
         f"| correction E, N | {_vec(m.correction)} m (\\|c\\| = {_fmt(corr_norm, 2)} m) |",
         f"| obs. 1-sigma E, N | {_vec(sig)} m |",
     ]
-    lines += [f"| {k} | {_fmt(v)} |" for k, v in sorted(m.diagnostics().items())]
+    lines += [
+        f"| {k} | {_fmt(v)} |"
+        for k, v in sorted(m.diagnostics().items())
+        if k not in ROUTE_AXES_SHOWN
+    ]
     if notes:
         lines += ["", "<small>" + "; ".join(notes) + "</small>"]
     return "\n".join(lines)

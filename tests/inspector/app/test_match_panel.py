@@ -2,6 +2,8 @@
 
 from __future__ import annotations
 
+import numpy as np
+import pytest
 from fake_runs import make_run
 
 from inspector.app import match_markdown
@@ -128,3 +130,70 @@ def test_gate_rows_read_in_the_units_the_parameters_are_set_in():
     assert "| residual | 7.500 | <= 3.000 | ✗ **FAILED** |" in text
     assert "| heading cos | 0.9990 |" in text
     assert "*heading*: angle between the DR and route end directions, deg" in text
+
+
+def _fitted(m, *, filter_cov, obs_cov, innovation):
+    """``m`` with a fit on a road heading 30 deg left of East (E and N mix along and across)."""
+    import dataclasses
+
+    from estimator.results import FitSummary
+
+    a = np.radians(30.0)
+    normal = np.array([-np.sin(a), np.cos(a)])
+    summary = FitSummary(
+        along_offset_m=0.0,
+        along_curvature=0.0,
+        along_sigma_m=float(np.sqrt(obs_cov[0])),
+        along_observed=True,
+        cross_sigma_m=float(np.sqrt(obs_cov[1])),
+        lane_path=False,
+        innovation_along_m=innovation[0],
+        innovation_cross_m=innovation[1],
+        normal=normal,
+        heading_sigma_rad=0.01,
+    )
+    axes = np.column_stack([[np.cos(a), np.sin(a)], normal])  # E-N of along, across
+
+    def en(diag):
+        return None if diag is None else axes @ np.diag(diag) @ axes.T
+
+    return dataclasses.replace(
+        m,
+        fit=summary,
+        obs_cov=en(obs_cov),
+        innovation=axes @ np.asarray(innovation),
+        **({} if filter_cov is None else {"filter_cov": en(filter_cov)}),
+    )
+
+
+def test_the_panel_puts_the_filter_sigma_beside_the_observation_sigma_in_route_axes():
+    """The two parts of the Mahalanobis gate's S, along and across the route, beside the
+    innovation: a refusal by a filter sure of itself (0.5 m across against a 3 m innovation)
+    reads at a glance. The filter's pair is not repeated among the raw diagnostic rows."""
+    m = _fitted(
+        make_run(rejected=()).matches[1],
+        filter_cov=(4.5**2, 0.5**2),
+        obs_cov=(100.0**2, 1.25**2),
+        innovation=(-2.0, 3.0),
+    )
+    assert m.diagnostics()["filter_along_sigma_m"] == pytest.approx(4.5)
+    assert m.diagnostics()["filter_cross_sigma_m"] == pytest.approx(0.5)
+    lines = match_markdown(m, total=5).splitlines()
+    head = lines.index("| route axes, m | along | across (+ left) |")
+    assert lines[head + 2 : head + 5] == [
+        "| innovation | -2.00 | 3.00 |",
+        "| filter 1-sigma, before the update | 4.50 | 0.50 |",
+        "| observation 1-sigma | 100.00 | 1.25 |",
+    ]
+    assert not any(line.startswith("| filter_") for line in lines)
+    assert head < lines.index("| fit | |")  # under the gates it explains
+
+
+def test_the_route_axes_need_a_fit_and_say_when_the_filter_sigma_is_unknown():
+    """No fit, no route direction: no table. A record built without ``filter_cov`` (NaN)
+    shows dashes for the filter and no ``filter_*`` diagnostics."""
+    plain = make_run(rejected=()).matches[1]
+    assert plain.fit is None and "route axes" not in match_markdown(plain, total=5)
+    m = _fitted(plain, filter_cov=None, obs_cov=(9.0, 1.0), innovation=(1.0, -1.0))
+    assert "| filter 1-sigma, before the update | – | – |" in match_markdown(m, total=5)
+    assert not any(k.startswith("filter_") for k in m.diagnostics())

@@ -122,6 +122,23 @@ def test_matches_csv_one_row_per_attempt_with_every_gate(exported):
         assert math.isfinite(float(accepted[0][key]))
 
 
+def test_matches_csv_has_the_filter_sigma_beside_the_fit_sigma(exported):
+    """The Match tab's route-axes pair of the filter (before the update) is in the table as
+    the diagnostics' extra_* columns, beside the fit's own along and cross sigmas."""
+    result, _ = exported
+    rows = _rows(result.out_dir / "matches.csv")
+    fitted = [r for r in rows if r["extra_cross_sigma_m"]]
+    assert fitted
+    for r in fitted:
+        along, cross = (
+            float(r["extra_filter_along_sigma_m"]),
+            float(r["extra_filter_cross_sigma_m"]),
+        )
+        assert along > 0 and cross > 0
+    columns = list(rows[0])
+    assert columns.index("extra_filter_along_sigma_m") > columns.index("extra_cross_sigma_m")
+
+
 def _tum(path: Path) -> np.ndarray:
     """Read as evo's file_interface does: whitespace-separated, 8 columns, '#' comments."""
     lines = [ln for ln in path.read_text().splitlines() if ln and not ln.startswith("#")]
