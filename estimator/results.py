@@ -336,16 +336,14 @@ class MatchRecord:
             out["heading_obs_sigma_rad"] = self.heading_observation.sigma_rad
             out["heading_correction_rad"] = self.heading_observation.correction_rad
         if self.map_bias is not None and self.fit is not None:
-            n = self.fit.normal
-            t = np.array([n[1], -n[0]])
-            c = self.map_bias.cov
             here = self.map_bias.offset
             if np.all(np.isfinite(self.p_ref)):
                 here = self.map_bias.at(self.p_ref)
-            out["map_bias_along_m"] = float(t @ here)
-            out["map_bias_along_sigma_m"] = float(np.sqrt(t @ c @ t))
-            out["map_bias_cross_m"] = float(n @ here)
-            out["map_bias_cross_sigma_m"] = float(np.sqrt(n @ c @ n))
+            along_sigma, cross_sigma = self.route_sigmas(self.map_bias.cov)
+            out["map_bias_along_m"] = float(self.tangent @ here)
+            out["map_bias_along_sigma_m"] = float(along_sigma)
+            out["map_bias_cross_m"] = float(self.normal @ here)
+            out["map_bias_cross_sigma_m"] = float(cross_sigma)
             if np.isfinite(self.map_bias.chi2):
                 out["map_bias_chi2"] = self.map_bias.chi2
             if self.map_bias.rotation_rad != 0.0:
