@@ -258,11 +258,10 @@ def _unlevelled_note(chord_t: F64, t_first: float, sig_tilt: float) -> str:
     alignment claims, and a tilt error is dead reckoning's fastest-growing one."""
     return (
         f"initial alignment at {chord_t[-1] - t_first:.1f} s after the first GNSS fix levelled "
-        "as if the vehicle held its speed: no wheel speed, and the "
-        f"{len(chord_t)} fixes over {float(np.ptp(chord_t)):.1f} s of its aligning chord "
-        "cannot tell its acceleration (each 0.1 m/s^2 tilts roll or pitch 0.6 deg, against "
-        f"the {math.degrees(sig_tilt):.1f} deg the alignment claims); start the log at "
-        "standstill or give it wheel speed"
+        f"as if the vehicle held its speed: no wheel speed, and {len(chord_t)} fixes over "
+        f"{float(np.ptp(chord_t)):.1f} s cannot tell its acceleration (each 0.1 m/s^2 tilts "
+        f"roll or pitch 0.6 deg; the alignment claims {math.degrees(sig_tilt):.1f} deg); "
+        "start the log at standstill or give it wheel speed"
     )
 
 
