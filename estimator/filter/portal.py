@@ -144,7 +144,8 @@ def disagreeing_fixes(
     d = inp.gnss_pos[g, :2] - (pos + lever_en + gw)
     cov_r = row_position_cov(r).reshape(-1, 4)
     cov_f = np.column_stack([np.interp(tf, t_r, cov_r[:, i]) for i in range(4)])
-    growth = (cov_f - cov_r[0]).reshape(-1, 2, 2)
+    w, v = np.linalg.eigh((cov_f - cov_r[0]).reshape(-1, 2, 2))
+    growth = v @ (np.maximum(w, 0.0)[..., None] * np.swapaxes(v, -1, -2))  # grown, never shrunk
     white = cfg[C_WHITE_VAR]
     gate = cfg[C_GNSS_GATE]
     pe, pw = slice(E_POS, E_POS + 2), slice(E_GW, E_GW + 2)

@@ -58,3 +58,25 @@ def test_a_fix_off_across_a_diagonal_road_disagrees_and_one_along_it_does_not(
     aux = np.zeros(ly.NA)
     saved = (np.zeros(ly.NX), np.zeros((ly.NE, ly.NE)), aux, np.zeros(ly.NI, np.int64))
     assert portal.disagreeing_fixes(saved, 2.0, inp, range(2)) == [1]  # type: ignore[arg-type]
+
+
+def test_a_covariance_the_dead_reckoning_shrank_is_not_taken_off_the_fixes_noise(
+    monkeypatch: pytest.MonkeyPatch,
+) -> None:
+    """Dead reckoning's non-holonomic and wheel updates can shrink the position variance a
+    little through its correlations. Taken off the saved covariance, such shrinking can cancel
+    the fixes' white noise and leave the test a matrix that is singular or not positive, under
+    which a fix 1 m off passes; the growth counts as grown or nothing, so the fix is judged
+    against its noise (the E and N variances alone were clipped at zero the same way)."""
+    t = np.linspace(0.0, 2.0, 21)
+    rows = _rows(t, np.linspace(0.06, 0.05, len(t)), 0.05)
+    monkeypatch.setattr(portal, "_dead_reckoned_rows", lambda saved, t_stop, inp: rows)
+    cfg = np.zeros(ly.NC)
+    cfg[ly.C_TAU_W] = 100.0
+    cfg[ly.C_WHITE_VAR] = 0.01
+    cfg[ly.C_GNSS_GATE] = 13.8
+    fix_pos = np.zeros((1, 3))
+    fix_pos[0, :2] = 1.0 * ALONG
+    inp = SimpleNamespace(cfg=cfg, gnss_t=np.array([2.0]), gnss_pos=fix_pos)
+    saved = (np.zeros(ly.NX), np.zeros((ly.NE, ly.NE)), np.zeros(ly.NA), np.zeros(ly.NI, np.int64))
+    assert portal.disagreeing_fixes(saved, 2.0, inp, range(1)) == [0]  # type: ignore[arg-type]
