@@ -28,6 +28,11 @@ DEG_H = math.pi / 180 / 3600
 ACCEL_PRIOR_SIGMA_M_S2 = 1.0
 """a car's forward acceleration, 1 sigma, where nothing measures it: the prior the GNSS track's
 own estimate is weighed against when an alignment in motion has no wheel speed"""
+ACCEL_MIN_FIXES = 6
+"""fixes a parabola needs for the track's acceleration and the scatter that says how sure it is"""
+ACCEL_AHEAD_SPAN_S = 5.0
+"""how far from the aligning chord's start ``extensions.align_track_accel_ahead`` may reach for
+fixes: a car's acceleration holds for seconds, not for a whole drive's start"""
 
 
 def align(
@@ -80,9 +85,13 @@ def align(
     acc = acc_var = 0.0
     unlevelled: F64 | None = None
     if speed is not None and p.extensions.align_track_accel and not _wheels_cover(t0, wheel_t):
-        chord_t = gnss_t[i : j + 1]
+        end = j + 1
+        if p.extensions.align_track_accel_ahead and end - i < ACCEL_MIN_FIXES:
+            reach = int(np.searchsorted(gnss_t, gnss_t[i] + ACCEL_AHEAD_SPAN_S, side="right"))
+            end = max(end, min(i + ACCEL_MIN_FIXES, reach))
+        chord_t = gnss_t[i:end]
         headings = yaw - (np.interp(t_fix, imu_t, cum_yaw) - np.interp(chord_t, imu_t, cum_yaw))
-        told = _track_accel(chord_t, gnss_pos[i : j + 1, :2], headings)
+        told = _track_accel(chord_t, gnss_pos[i:end, :2], headings)
         if told is None:
             unlevelled = chord_t
         else:
@@ -97,7 +106,7 @@ def align(
         unlevelled = None
     roll, pitch, sig_tilt = _tilt(imu_t, gyro, accel, still, t0, k0, speed, acc_x, acc_var)
     if unlevelled is not None:
-        notes += (_unlevelled_note(unlevelled, float(gnss_t[use[0]]), sig_tilt),)
+        notes += (_unlevelled_note(unlevelled, t_fix - float(gnss_t[use[0]]), sig_tilt),)
     q = euler_to_quat(roll, pitch, yaw)
     C = np.empty((3, 3))
     quat_to_dcm(q, C)
@@ -239,7 +248,7 @@ def _track_accel(t: F64, pos: F64, headings: F64) -> tuple[float, float] | None:
     s = np.r_[0.0, np.cumsum(steps[:, 0] * np.cos(mid) + steps[:, 1] * np.sin(mid))]
     dt = t - t[-1]
     prior = ACCEL_PRIOR_SIGMA_M_S2**2
-    if len(t) < 6 or float(np.ptp(dt)) < 0.5:
+    if len(t) < ACCEL_MIN_FIXES or float(np.ptp(dt)) < 0.5:
         return None
     coef, cov = np.polyfit(dt, s, 2, cov=True)
     fit, fit_var = 2.0 * float(coef[0]), 4.0 * float(cov[0, 0])
@@ -250,16 +259,17 @@ def _track_accel(t: F64, pos: F64, headings: F64) -> tuple[float, float] | None:
     return gain * fit, (1.0 - gain) * prior
 
 
-def _unlevelled_note(chord_t: F64, t_first: float, sig_tilt: float) -> str:
+def _unlevelled_note(fixes_t: F64, t_align: float, sig_tilt: float) -> str:
     """The warning for an alignment in motion levelled as if the car held its speed: no
-    wheel speed, and too few fixes on the aligning chord (a 1-5 Hz receiver) or too much
-    scatter for :func:`_track_accel` to tell its acceleration. An acceleration a levels roll
+    wheel speed, and too few fixes on and after the aligning chord (a 1 Hz receiver) or too
+    much scatter for :func:`_track_accel` to tell its acceleration. An acceleration a levels roll
     or pitch a / g off (0.58 deg per 0.1 m/s^2) under the tilt sigma ``sig_tilt`` the
-    alignment claims, and a tilt error is dead reckoning's fastest-growing one."""
+    alignment claims, and a tilt error is dead reckoning's fastest-growing one. ``fixes_t``:
+    the fixes the parabola was given; ``t_align``: the aligning fix, s after the first."""
     return (
-        f"initial alignment at {chord_t[-1] - t_first:.1f} s after the first GNSS fix levelled "
-        f"as if the vehicle held its speed: no wheel speed, and {len(chord_t)} fixes over "
-        f"{float(np.ptp(chord_t)):.1f} s cannot tell its acceleration (each 0.1 m/s^2 tilts "
+        f"initial alignment at {t_align:.1f} s after the first GNSS fix levelled "
+        f"as if the vehicle held its speed: no wheel speed, and {len(fixes_t)} fixes over "
+        f"{float(np.ptp(fixes_t)):.1f} s cannot tell its acceleration (each 0.1 m/s^2 tilts "
         f"roll or pitch 0.6 deg; the alignment claims {math.degrees(sig_tilt):.1f} deg); "
         "start the log at standstill or give it wheel speed"
     )

@@ -596,6 +596,13 @@ class ExtensionParams:
         "the tilt's sigma by what it leaves unknown: comma2k19 starts accelerating 1.4 m/s^2, "
         "levelled 9 deg nose-up under a 1.5 deg sigma without it",
     )
+    align_track_accel_ahead: bool = param(
+        True,
+        "with align_track_accel, where the aligning chord holds too few fixes for the parabola "
+        "(a 1-2 Hz receiver: two or three), the fixes after the aligning one are added until "
+        "six, within 4 s of the chord's start: comma2k19 thinned to 2 Hz was levelled 6.6 deg "
+        "nose-up without them",
+    )
     wheel_scale_state: bool = param(True, "estimate the wheel-speed scale factor as a state")
     gyro_scale_consider: bool = param(
         True,

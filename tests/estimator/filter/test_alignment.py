@@ -127,6 +127,35 @@ def test_an_alignment_without_wheel_speed_levels_with_the_tracks_acceleration() 
     assert _comma_first_pitch(no_wheel=True, track_accel=False) - with_wheels > 5.0
 
 
+def _thinned(inputs: Inputs, step: int) -> Inputs:
+    g = inputs.log.gnss
+    keep = np.arange(len(g.t)) % step == 0
+    fields = ("t", "lat", "lon", "alt", "status", "cov_enu")
+    thinned = dataclasses.replace(g, **{f: getattr(g, f)[keep] for f in fields})
+    return dataclasses.replace(inputs, log=dataclasses.replace(inputs.log, gnss=thinned))
+
+
+@needs_comma
+def test_a_two_hertz_receiver_levels_with_the_fixes_after_its_chord() -> None:
+    """comma2k19 thinned to 2 Hz: the one-second aligning chord holds three fixes, too few for
+    a parabola, and it was levelled as if the car held its speed, 6.6 deg nose-up (the wheels'
+    run: -1.4 deg). ``extensions.align_track_accel_ahead`` adds the fixes after the aligning one
+    (six within 5 s of the chord's start) and the level is the wheels' to a degree."""
+    with_wheels = _comma_first_pitch(no_wheel=False)
+    inputs = _thinned(open_inputs(COMMA, topics=TopicChoice(no_wheel=True)), 5)
+    pitch = {}
+    for ahead in (True, False):
+        params = with_values(
+            load_params(COMMA_CONFIG), {"extensions.align_track_accel_ahead": ahead}
+        )
+        r = run(inputs.log, None, params, method="baseline", frame=inputs.frame)
+        pitch[ahead] = float(np.degrees(r.epochs.attitude[0, 1]))
+        warned = [w for w in r.warnings if w.startswith("initial alignment")]
+        assert bool(warned) is not ahead
+    assert abs(pitch[True] - with_wheels) < 1.5
+    assert pitch[False] - with_wheels > 5.0
+
+
 @needs_comma
 def test_an_outage_from_the_logs_third_second_is_dead_reckoned_honestly() -> None:
     """GNSS removed 3 s after comma2k19's start, wheel speed left out: levelled through the
