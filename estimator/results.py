@@ -43,6 +43,9 @@ class Gate(Enum):
     ALTERNATIVE_RIGHT = "alternative_right"
     ALTERNATIVE_REVERSED = "alternative_reversed"
     CORRECTION_CAP = "correction_cap"
+    ROTATION_CONSISTENCY = "rotation_consistency"
+    """the fitted rotation against the filter's heading covariance
+    (``extensions.rotation_consistency``)"""
     DR_SEPARATION = "dr_separation"
     """the filter's, after the update: how far the outage's route updates moved the position
     from dead reckoning (``extensions.dr_separation``)"""

@@ -96,6 +96,14 @@ ALTERNATIVES = {
     r: GateSpec(Gate.alternative(r), ">=", lambda g: g.alternative_margin, "") for r in Rival
 }
 CORRECTION_CAP = GateSpec(Gate.CORRECTION_CAP, "<=", lambda g: g.max_correction_m, "|z - p_dr|, m")
+ROTATION_CONSISTENCY = GateSpec(
+    Gate.ROTATION_CONSISTENCY,
+    "<=",
+    lambda g: g.rotation_chi2,
+    "chi-square of the fitted rotation, S = yaw variance + map rotation variance + the fit's "
+    "heading variance",
+)
+"""judged with the filter's covariance at the attempt (``extensions.rotation_consistency``)"""
 DR_SEPARATION = GateSpec(
     Gate.DR_SEPARATION,
     "<=",

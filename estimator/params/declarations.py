@@ -163,6 +163,16 @@ class GateParams:
         hi=1000,
         step=0.5,
     )
+    rotation_chi2: float = param(
+        10.8,
+        "chi-square gate on the fitted rotation read as a heading correction, against the "
+        "filter's yaw variance plus the map's rotation variance plus the fit's own heading "
+        "variance (1 dof; 10.8 = 99.9 %, the Mahalanobis gate's confidence; "
+        "extensions.rotation_consistency)",
+        lo=1,
+        hi=1000,
+        step=0.5,
+    )
     max_lateral_jump_m: float = param(
         5.0,
         "largest move of the vehicle across the route away from its learned lane offset",
@@ -650,6 +660,18 @@ class ExtensionParams:
         "would add little along the road but carry the window's shape error there (a gentle "
         "bend under a gyro drift fits metres to tens of metres off, the same way attempt after "
         "attempt); off without wheel speed under no_wheel_caution",
+    )
+    rotation_consistency: bool = param(
+        False,
+        "refuse a match whose fitted rotation, read as a heading correction, the filter's yaw "
+        "covariance (with the map's rotation and the fit's heading sigma) cannot support "
+        "(gates.rotation_chi2): the Mahalanobis gate tests only the position, whose "
+        "covariance is stretched along the direction of travel; a window turned far beyond "
+        "the heading's sigma means the route is drawn wrong there or the filter's heading "
+        "is, and either way the position update spreads the cross-track innovation along "
+        "the filter's own track. Off: the fit's heading sigma leaves out the route's own "
+        "direction error, and on a route drawn from the robot's own fixes (the Husky lot with "
+        "wheel speed) it refuses good matches",
     )
     reanchor: bool = param(
         False,

@@ -20,8 +20,10 @@ def test_the_table_holds_every_gate_in_gate_order():
         rivals=tuple((r, GOOD, 50.0) for r in Rival),
     )
     table = gate_table(GOOD, validation, 2.0, Params())
-    # the dead-reckoning separation is the filter's gate, tested after the update
-    assert [d.gate for d in table] == [g for g in Gate if g is not Gate.DR_SEPARATION]
+    # the dead-reckoning separation is the filter's gate, tested after the update, and the
+    # rotation's consistency the driver's, against the filter's yaw
+    driver_gates = (Gate.DR_SEPARATION, Gate.ROTATION_CONSISTENCY)
+    assert [d.gate for d in table] == [g for g in Gate if g not in driver_gates]
     assert all(d.passed for d in table)
     assert [d.name for d in table][:4] == [s.gate.value for s in SHAPE_GATES]
     without = gate_table(GOOD, None, 2.0, Params())

@@ -181,6 +181,7 @@ def turned_map_drive():
         {"extensions.map_turn_two_places": False},
         {"extensions.map_turn_honest_consider": True},
         {"extensions.map_turn_release": False},
+        {"extensions.rotation_consistency": True, "gates.rotation_chi2": 1.0},
         {"offset.map_bias_estimated": False},
         {"pseudo.shape_noise_m": 1.5},
         {"pseudo.along_sigma_min_m": 0.75},
@@ -246,6 +247,7 @@ REPLAYED_ATTEMPT_BY_ATTEMPT = frozenset(
         "search_correction_cap",
         "map_bias_portal_cut",
         "dr_separation_gyro_scale",
+        "rotation_consistency",
     }
 )
 """extensions a re-run meets by replaying the old attempts (the map bias's fit is redone at
