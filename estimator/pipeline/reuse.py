@@ -144,6 +144,7 @@ def filter_key(p: Params) -> Key:
         ext.portal_rerun,
         ext.portal_rerun_after_alignment,
         ext.align_track_accel,
+        ext.align_track_accel_ahead,
         ext.cross_track_heading_widen,
         ext.no_wheel_caution,
         p.output_rate_hz,
