@@ -79,9 +79,10 @@ def test_the_sigma_of_an_imu_gap_the_route_bridged_is_the_gaps_own():
 def test_drive_32_is_warned_where_its_accepted_trace_is_far_off_along_the_road():
     """Stress drive 32 (long tunnel, no odometer): every route update in its 356 s outage is
     accepted and the trace sits on the route, but on the tunnel's straights the filter's
-    sigma grows past 100 m and its error along the road with it. The warning names the outage
-    and the sigma the filter itself reported; the error against truth at the peak shows it is
-    no false alarm. The baseline (no route updates) gets no such line."""
+    sigma grows past 100 m and its error along the road with it (69 m at the peak since
+    ``align_track_accel_ahead``, 7 m across). The warning names the outage and the sigma the
+    filter itself reported; the error against truth at the peak shows it is no false alarm.
+    The baseline (no route updates) gets no such line."""
     drive = build(drive_spec(32))
     runs = run_methods(drive.inputs, Params(), methods=("baseline", "proposed"))
     proposed, baseline = runs["proposed"], runs["baseline"]
@@ -94,9 +95,12 @@ def test_drive_32_is_warned_where_its_accepted_trace_is_far_off_along_the_road()
     assert int(m["n"]) == sum(r.accepted for r in proposed.matches if a <= r.t <= b)
     e = proposed.epochs
     sigma = np.hypot(e.position_sigma[:, 0], e.position_sigma[:, 1])
-    k = e.index_at(t0 + float(m["at"]))
+    # the peak's time is given to 0.1 s, and an update may shrink the sigma within that
+    near = np.flatnonzero(np.abs(e.t - (t0 + float(m["at"]))) <= 0.05 + 1e-6)
+    k = int(near[np.argmax(sigma[near])])
     assert int(m["peak"]) == round(sigma[k]) and sigma[k] > 100.0
     truth = deviation_series(proposed, drive.inputs.route, drive.inputs.log).truth
     j = np.searchsorted(truth.index, k)
-    assert abs(truth.along_err_m[j]) > 100.0 > abs(truth.cross_err_m[j])
+    # tens of metres off along the road, where the sigma warned of, and metres across it
+    assert abs(truth.along_err_m[j]) > max(UNPLACED_SIGMA_M, 5.0 * abs(truth.cross_err_m[j]))
     assert not any(WARNING.match(w) for w in baseline.warnings)
