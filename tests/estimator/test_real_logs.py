@@ -147,9 +147,23 @@ def test_husky_long_outage_beats_dead_reckoning_against_its_held_out_fixes(tmp_p
     assert _rmse_to(fixes, proposed) < 0.5 * _rmse_to(fixes, runs["baseline"])
 
 
+NO_WHEEL_OUTAGE = (200.0, 320.0)
+"""the Husky lot's outage where, without wheel speed, routefuse ends furthest from dead reckoning"""
+
+
+@pytest.fixture
+def husky_without_wheels(tmp_path):
+    """The Husky lot without its wheel topic, its route from its own GNSS, its config."""
+    log = load_log(HUSKY)
+    route_path = tmp_path / "husky.route.geojson"
+    route_path.write_text(json.dumps(route_from_gnss(log, name="husky")), encoding="utf-8")
+    inputs = open_inputs(HUSKY, route_path, topics=TopicChoice(no_wheel=True))
+    return inputs, load_params(CONFIGS / "husky_test1.toml")
+
+
 @needs_husky
 def test_husky_without_wheel_speed_the_portal_re_run_drops_the_fixes_dead_reckoning_disputes(
-    tmp_path,
+    husky_without_wheels,
 ):
     """Without wheel speed, the fixes of the lot's 9 s before the 200-320 s outage disagree
     with the filter dead-reckoned from the state saved before them, across its travel: the
@@ -157,12 +171,8 @@ def test_husky_without_wheel_speed_the_portal_re_run_drops_the_fixes_dead_reckon
     included, since 4e84eec), drops them, and dead reckoning through the outage lands 4.2 m
     RMS from the held-out fixes where it was 8.5 m with them taken. Tested against the E and
     N variances alone they had been kept."""
-    log = load_log(HUSKY)
-    route_path = tmp_path / "husky.route.geojson"
-    route_path.write_text(json.dumps(route_from_gnss(log, name="husky")), encoding="utf-8")
-    inputs = open_inputs(HUSKY, route_path, topics=TopicChoice(no_wheel=True))
-    config = load_params(CONFIGS / "husky_test1.toml")
-    outage = (200.0, 320.0)
+    inputs, config = husky_without_wheels
+    outage = NO_WHEEL_OUTAGE
     fixes = _held_out_fixes(inputs, outage)
 
     def baseline(params: Params):
@@ -180,7 +190,9 @@ def test_husky_without_wheel_speed_the_portal_re_run_drops_the_fixes_dead_reckon
 
 
 @needs_husky
-def test_husky_without_wheel_speed_a_window_turned_beyond_the_heading_sigma_is_refused(tmp_path):
+def test_husky_without_wheel_speed_a_window_turned_beyond_the_heading_sigma_is_refused(
+    husky_without_wheels,
+):
     """Without wheel speed, the 200-320 s outage's last accepted match (311.6 s) had a window
     turned 15.8 deg from the route (the fit's heading sigma 1.1 deg) where the filter's yaw
     sigma was 3.0 deg. The position gate passed it (chi-square 1.3): the filter's covariance
@@ -188,12 +200,8 @@ def test_husky_without_wheel_speed_a_window_turned_beyond_the_heading_sigma_is_r
     across the road was taken as an error along the track, and the update moved the position
     6.8 m the wrong way along. The rotation gate (``extensions.rotation_consistency``) refuses
     it: 4.54 m RMS against the held-out fixes becomes 4.14 m, dead reckoning 4.23 m."""
-    log = load_log(HUSKY)
-    route_path = tmp_path / "husky.route.geojson"
-    route_path.write_text(json.dumps(route_from_gnss(log, name="husky")), encoding="utf-8")
-    inputs = open_inputs(HUSKY, route_path, topics=TopicChoice(no_wheel=True))
-    config = load_params(CONFIGS / "husky_test1.toml")
-    outage = (200.0, 320.0)
+    inputs, config = husky_without_wheels
+    outage = NO_WHEEL_OUTAGE
     fixes = _held_out_fixes(inputs, outage)
 
     def rmse(method: str, on: bool) -> tuple[float, object]:
