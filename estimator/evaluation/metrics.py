@@ -409,8 +409,7 @@ def map_bias_notes(run: Run) -> list[str]:
         )
         if rec is None or rec.map_bias is None or rec.fit is None:
             continue
-        bias, n = rec.map_bias, rec.fit.normal
-        t = np.array([n[1], -n[0]])
+        bias, n, t = rec.map_bias, rec.normal, rec.tangent
         if not bias.applied and not np.all(np.isfinite(bias.learned)):
             notes.append(
                 f"map bias for the outage at {a - run.t0:.1f} s: nothing measured (too little "

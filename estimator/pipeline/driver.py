@@ -52,7 +52,6 @@ from estimator.filter.layout import (
     E_SCALE,
     E_VEL,
     I_IMU,
-    O_COV_EN,
     O_DIST,
     O_DR,
     O_GNSS,
@@ -968,8 +967,7 @@ class Driver:
         factor = rec.window_length_m / new_road
         if factor <= 1.0 or rec.fit is None:
             return rec
-        n = rec.fit.normal
-        t = np.array([n[1], -n[0]])
+        t = rec.tangent
         along_var = float(t @ rec.obs_cov @ t)
         cov = rec.obs_cov + (factor - 1.0) * along_var * np.outer(t, t)
         return dataclasses.replace(rec, obs_cov=cov)
@@ -1644,12 +1642,7 @@ def along_drift_psd(rows: F64, t_a: float, t: float) -> float:
     moved = rows[i1, O_POS : O_POS + 2] - before[:, O_POS : O_POS + 2]
     dr = rows[i1, O_DR : O_DR + 2] - before[:, O_DR : O_DR + 2]
     c = np.sum((moved - dr) * u, axis=1)
-    # u' P u along the travel, with the E-N covariance
-    s2 = (
-        (before[:, O_SIG_POS] * u[:, 0]) ** 2
-        + (before[:, O_SIG_POS + 1] * u[:, 1]) ** 2
-        + 2.0 * before[:, O_COV_EN] * u[:, 0] * u[:, 1]
-    )
+    s2 = np.einsum("ni,nij,nj->n", u, row_position_cov(before), u)  # u' P u along the travel
     tau = before[:, O_T] - t_a
     q = 3.0 * np.maximum(c * c - s2, 0.0) / np.maximum(tau, w) ** 3
     q[speed <= 1.0] = 0.0
