@@ -610,7 +610,7 @@ class ExtensionParams:
         True,
         "with align_track_accel, where the aligning chord holds too few fixes for the parabola "
         "(a 1-2 Hz receiver: two or three), the fixes after the aligning one are added until "
-        "six, within 4 s of the chord's start: comma2k19 thinned to 2 Hz was levelled 6.6 deg "
+        "six, within 5 s of the chord's start: comma2k19 thinned to 2 Hz was levelled 6.6 deg "
         "nose-up without them",
     )
     wheel_scale_state: bool = param(True, "estimate the wheel-speed scale factor as a state")
