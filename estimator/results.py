@@ -390,6 +390,60 @@ class Epochs:
 
 
 @dataclass(frozen=True)
+class OutageExit:
+    """How far a GNSS outage's estimate ended from the fixes that came back after it: the one
+    check of an outage a log without ground truth still allows, and the one that catches an
+    estimate that was wrong while it claimed to be right (route updates following a wrong map,
+    dead reckoning beyond its noise model). Built by
+    :func:`estimator.evaluation.exits.outage_exits`."""
+
+    start: float
+    end: float
+    """the outage (absolute time, as ``Run.degraded_intervals``)"""
+    fix_t: tuple[float, float]
+    """first and last fix compared (absolute time)"""
+    n_fixes: int
+    error: F64
+    """(2,) E, N m: the estimate carried on from the outage's end by its own velocity, minus
+    the fixes (their median)"""
+    estimate_cov: F64
+    """(2, 2) m^2: the E-N covariance the estimate claimed at the outage's end"""
+    fix_cov: F64
+    """(2, 2) m^2: the fixes' (the median of their variances, the wander included)"""
+
+    @property
+    def distance_m(self) -> float:
+        return float(np.hypot(*self.error))
+
+    @property
+    def chi2(self) -> float:
+        """e' (P + R)^-1 e, 2 degrees of freedom: 13.8 or more once in a thousand outages whose
+        estimate and fixes are as good as they claim."""
+        s = self.estimate_cov + self.fix_cov
+        return float(self.error @ np.linalg.solve(s, self.error))
+
+    @property
+    def estimate_sigma_m(self) -> float:
+        """the estimate's claimed 1-sigma in the direction of the error (its whole horizontal
+        sigma, sqrt(trace P), when the error is zero)"""
+        d = self.distance_m
+        if d == 0.0:
+            return float(np.sqrt(np.trace(self.estimate_cov)))
+        u = self.error / d
+        return float(np.sqrt(u @ self.estimate_cov @ u))
+
+    @property
+    def overconfident(self) -> bool:
+        """the estimate ended farther from the fixes than it and they claim, at 99.9 %"""
+        return self.chi2 > EXIT_CHI2_2DOF
+
+
+EXIT_CHI2_2DOF = 13.816
+"""chi-square of 2 degrees of freedom at 99.9 %: an outage's exit error beyond it is not a
+draw of honest errors (one outage in a thousand)"""
+
+
+@dataclass(frozen=True)
 class Run:
     """One estimator run over one log."""
 
@@ -406,6 +460,8 @@ class Run:
     dropped_fix_times: tuple[float, ...] = ()
     """fixes the fixed-lag re-run at the start of an outage left out (they disagreed with
     dead reckoning; ``extensions.portal_rerun``)"""
+    exits: tuple[OutageExit, ...] = ()
+    """one per degraded interval after which the filter took fixes again"""
     _reuse: ReuseState | None = field(default=None, repr=False, compare=False)
     """private to :mod:`estimator.pipeline`: the checkpoints that let ``run(..., reuse=this_run)``
     restart at the first match attempt a parameter change affects (None: the run kept none)"""

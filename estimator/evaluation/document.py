@@ -48,8 +48,26 @@ def results_document(
         "t0": first.t0,
         "outages": [list(o) for o in outages],
         "n_epochs": {m: metrics[m].n_epochs for m in methods},
+        "exits": {m: exits_document(runs[m]) for m in methods},
         "warnings": list(dict.fromkeys(w for r in runs.values() for w in r.warnings)),
     }
+
+
+def exits_document(run: Run) -> list[dict[str, Any]]:
+    """The run's exit checks (:class:`~estimator.results.OutageExit`), times from the log's
+    start: what a report or a CI job reads to tell a trustworthy outage from a lucky one."""
+    return [
+        {
+            "outage": [x.start - run.t0, x.end - run.t0],
+            "fixes": [x.fix_t[0] - run.t0, x.fix_t[1] - run.t0],
+            "n_fixes": x.n_fixes,
+            "distance_m": x.distance_m,
+            "estimate_sigma_m": x.estimate_sigma_m,
+            "chi2": x.chi2,
+            "overconfident": x.overconfident,
+        }
+        for x in run.exits
+    ]
 
 
 def distance_m(run: Run) -> float:

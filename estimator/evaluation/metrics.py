@@ -17,6 +17,7 @@ from typing import Literal
 import numpy as np
 from numpy.typing import NDArray
 
+from estimator.evaluation.exits import exit_notes
 from estimator.log import Log
 from estimator.matching import learn_lane_offset, track_on_route
 from estimator.nav.frames import LocalFrame
@@ -495,8 +496,9 @@ def run_notes(run: Run) -> list[str]:
     """What a run did at its outages, outage kind by kind, as ``routefuse run`` prints it and
     the inspector shows it under its status line: the fixes its portal re-runs left out
     (:func:`portal_notes`), the outages too short for any attempt
-    (:func:`unattempted_notes`) and the map biases measured (:func:`map_bias_notes`)."""
-    return [*portal_notes(run), *unattempted_notes(run), *map_bias_notes(run)]
+    (:func:`unattempted_notes`), the map biases measured (:func:`map_bias_notes`) and how far
+    each outage ended from the fixes after it (:func:`~estimator.evaluation.exits.exit_notes`)."""
+    return [*portal_notes(run), *unattempted_notes(run), *map_bias_notes(run), *exit_notes(run)]
 
 
 _ROUTE_COLUMNS = (

@@ -401,6 +401,15 @@ def _wheel_arrays(log: Log, s: SensorParams, warnings: list[str]) -> tuple[F64, 
     return wheel_t, wheel_v
 
 
+def fix_wander_var(cfg: F64) -> F64:
+    """(3,) E, N, U m^2: the stationary variance of the GNSS wander state that
+    :func:`prepare_inputs` took out of each fix's variance (``FilterInputs.gnss_var`` plus
+    this is a fix's whole variance)."""
+    tau = float(cfg[C_TAU_W])
+    var: F64 = np.array([cfg[C_QW_H], cfg[C_QW_H], cfg[C_QW_V]]) * tau / 2.0
+    return var
+
+
 def _gnss_arrays(log: Log, p: Params, frame: LocalFrame, outages: Outages) -> tuple[F64, F64, F64]:
     """GNSS fixes: valid, not in an injected outage, in the local frame, sorted, with floored
     variances (a default where the receiver reports none)."""

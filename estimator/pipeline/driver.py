@@ -28,6 +28,7 @@ import numpy as np
 from numpy.typing import NDArray
 
 from estimator.errors import LogError, RoutefuseError
+from estimator.evaluation.exits import exit_warnings, outage_exits
 from estimator.evaluation.metrics import interval_mask
 from estimator.filter.alignment import MG
 from estimator.filter.engine import Filter, epochs_of, row_position_cov
@@ -70,6 +71,7 @@ from estimator.filter.route_update import applied_obs_cov, apply_route_match, tu
 from estimator.filter.setup import (
     IMU_GAPS_NAMED,
     FilterInputs,
+    fix_wander_var,
     prepare_inputs,
     route_errors_estimated,
 )
@@ -182,6 +184,15 @@ def run(
         memo=driver.memo.own,
         dropped_fixes=tuple(driver.dropped_fixes),
     )
+    exits = outage_exits(
+        epochs,
+        inputs.degraded,
+        inputs.gnss_t,
+        inputs.gnss_pos,
+        inputs.gnss_var + fix_wander_var(inputs.cfg),
+        p.sensors.gnss_lever_arm_m,
+    )
+    routed = [any(r.accepted and x.start <= r.t <= x.end for r in driver.records) for x in exits]
     return Run(
         method=method,
         params=p,
@@ -191,6 +202,7 @@ def run(
         degraded_intervals=inputs.degraded,
         t0=log.t_start,
         dropped_fix_times=tuple(driver.dropped_fixes),
+        exits=exits,
         warnings=tuple(log.warnings)
         + inputs.warnings
         + (route.warnings if route is not None else ())
@@ -205,7 +217,8 @@ def run(
             far_route_warnings(epochs, route, driver.records, inputs.degraded, log.t_start, p)
             if matching and route is not None
             else ()
-        ),
+        )
+        + exit_warnings(method, exits, routed, log.t_start),
         _reuse=state,
     )
 

@@ -58,6 +58,9 @@ _LOG: tuple[tuple[str, ColumnType], ...] = (
     ("matches_attempted", int),
     ("matches_accepted", int),
     *((f"refused_{k}", int) for k in REFUSAL_KEYS),
+    ("exits", int),
+    ("exits_overconfident", int),
+    ("exit_chi2_max", float),
 )
 _HEADLINE = tuple((k, float) for k in (*ROUTE_KEYS, *TRUTH_KEYS))
 _PER_METHOD = tuple((f"{m}_{k}", float) for m in METHODS for k in (*ROUTE_KEYS, *TRUTH_KEYS))
@@ -137,6 +140,7 @@ def task_row(
         "accepted": 0,
         "rejected": {},
     }
+    exits = doc.get("exits", {}).get(method, ())
     refused = dict.fromkeys(REFUSAL_KEYS, 0)
     for gate, n in matches["rejected"].items():
         refused[gate if gate in refused else "other"] += int(n)
@@ -148,6 +152,9 @@ def task_row(
         matches_attempted=int(matches["attempted"]),
         matches_accepted=int(matches["accepted"]),
         **{f"refused_{k}": v for k, v in refused.items()},
+        exits=len(exits),
+        exits_overconfident=sum(bool(x["overconfident"]) for x in exits),
+        exit_chi2_max=max((float(x["chi2"]) for x in exits), default=None),
     )
     for m, figures in doc["methods"].items():
         route = figures.get("route") or {}

@@ -4,6 +4,7 @@ free loopback port, an in-process inspector server and a polling wait."""
 
 from __future__ import annotations
 
+import json
 import socket
 import time
 from contextlib import contextmanager
@@ -38,6 +39,23 @@ def wait_until(predicate, timeout: float = 30.0, what="condition"):
             return value
         time.sleep(0.1)
     raise AssertionError(f"timed out waiting for {what() if callable(what) else what}")
+
+
+def route_moved_north(route: Path, dlat_deg: float, out: Path) -> Path:
+    """``route`` (GeoJSON) with every latitude moved ``dlat_deg`` (0.00009 deg is about 10 m),
+    written to ``out``: a map drawn off the road driven."""
+
+    def move(c):
+        if isinstance(c[0], float | int):
+            return [c[0], c[1] + dlat_deg, *c[2:]]
+        return [move(x) for x in c]
+
+    data = json.loads(route.read_text(encoding="utf-8"))
+    for feature in data["features"]:
+        geometry = feature["geometry"]
+        feature["geometry"] = {**geometry, "coordinates": move(geometry["coordinates"])}
+    out.write_text(json.dumps(data), encoding="utf-8")
+    return out
 
 
 @contextmanager

@@ -7,13 +7,12 @@ docs/far_route.png."""
 
 from __future__ import annotations
 
-import json
 import os
 import shutil
 from pathlib import Path
 
 import pytest
-from _browser import panel_screenshot, served, session_page
+from _browser import panel_screenshot, route_moved_north, served, session_page
 
 pytestmark = pytest.mark.e2e
 
@@ -21,21 +20,12 @@ REPO = Path(__file__).resolve().parents[2]
 VIEWPORT = {"width": 1400, "height": 1100}
 
 
-def _moved_north(geometry: dict, dlat: float) -> dict:
-    def move(c):
-        if isinstance(c[0], float | int):
-            return [c[0], c[1] + dlat, *c[2:]]
-        return [move(x) for x in c]
-
-    return {**geometry, "coordinates": move(geometry["coordinates"])}
-
-
 def test_a_route_too_far_for_any_update_is_named_on_the_page(browser, tmp_path):
-    data = json.loads((REPO / "sample_logs" / "monaco_tunnel.route.geojson").read_text())
-    for feature in data["features"]:
-        feature["geometry"] = _moved_north(feature["geometry"], 0.0009)
-    route = tmp_path / "monaco_north.route.geojson"
-    route.write_text(json.dumps(data))
+    route = route_moved_north(
+        REPO / "sample_logs" / "monaco_tunnel.route.geojson",
+        0.0009,
+        tmp_path / "monaco_north.route.geojson",
+    )
     with served(REPO / "sample_logs" / "monaco_tunnel.mcap", route) as (server, controller, app):
         run = controller.session.proposed
         assert not any(m.accepted for m in run.matches)

@@ -27,7 +27,7 @@ from inspector.fleet.engine import QuietProgress
 from tests.inspector.fleet.conftest import REPO, copy_drive, dask_env
 
 HOSTILE = "<img src=x onerror=alert(1)>&'\""
-OUTAGE = "10:30"
+OUTAGE = "10:20"
 
 
 @pytest.fixture(scope="module")
@@ -64,7 +64,7 @@ def test_sweep_through_a_running_scheduler(cli_sweep):
     row = next(r for r in tuned if r["label"] == "drive_a")
     params = with_values(Params(), {"window.length_m": 100.0})
     inputs = open_inputs(data / "drive_a.mcap", data / "drive_a.route.geojson")
-    session = run_methods(inputs, params, outages=[(10.0, 30.0)])
+    session = run_methods(inputs, params, outages=[(10.0, 20.0)])
     assert inputs.route is not None
     for method in ("baseline", "proposed"):
         m = method_metrics(session[method], inputs.route, inputs.log, params=params)
@@ -75,6 +75,11 @@ def test_sweep_through_a_running_scheduler(cli_sweep):
     refused = sum(v for k, v in row.items() if k.startswith("refused_"))
     assert (row["matches_attempted"], row["matches_accepted"]) == (attempts, accepted)
     assert refused == attempts - accepted
+    # the outage, not the tunnel at 38 s that the drive ends in, is followed by fixes
+    exits = session["proposed"].exits
+    assert row["exits"] == len(exits) == 1
+    assert row["exits_overconfident"] == sum(x.overconfident for x in exits)
+    assert row["exit_chi2_max"] == pytest.approx(exits[0].chi2)
     # the CSV is the same table; the set's parameters are written for routefuse serve
     csv_lines = (out / "results.csv").read_text().splitlines()
     assert len(csv_lines) == 7 and csv_lines[0].startswith("task_id,log,label")

@@ -1,0 +1,139 @@
+"""The exit check: where each GNSS outage's estimate ended against the fixes that followed it.
+
+A log without ground truth still has this one measure of an outage, and it is the one that
+tells a confident wrong answer from an honest one: an estimate that followed a wrong map, or
+dead reckoning beyond its noise model, comes out of the tunnel far from the returning fixes
+under a small claimed sigma. The fixes compared are the first ones the filter itself accepted
+after the outage (its robust GNSS test drops the multipath jumps at a portal, and after a gap
+takes fixes once they agree with each other), and the estimate is carried on to each from the
+outage's end by the run's own velocity, so the position jumps their updates make play no
+part."""
+
+from __future__ import annotations
+
+import math
+from collections.abc import Sequence
+
+import numpy as np
+from numpy.typing import NDArray
+
+from estimator.results import Epochs, OutageExit, Run
+
+F64 = NDArray[np.float64]
+
+EXIT_SPAN_S = 3.0
+"""the fixes accepted within this long of the first are compared (their median): one fix is
+one multipath jump away from a false alarm, and a receiver holds a jump for about a second"""
+
+
+def outage_exits(
+    epochs: Epochs,
+    degraded: Sequence[tuple[float, float]],
+    fix_t: F64,
+    fix_pos: F64,
+    fix_var: F64,
+    lever_arm_m: Sequence[float],
+) -> tuple[OutageExit, ...]:
+    """One :class:`~estimator.results.OutageExit` per interval of ``degraded`` (absolute times)
+    after which the run accepted a fix. ``fix_t``, ``fix_pos`` ((N, >=2) E, N m) and
+    ``fix_var`` ((N, >=2) m^2, the fixes' whole variance) are the filter's fixes on the IMU
+    clock; ``lever_arm_m`` the antenna in the body frame (forward, left, up: the horizontal
+    part is turned by the yaw)."""
+    e = epochs
+    if len(e) < 2 or len(fix_t) == 0:
+        return ()
+    # where the estimate would be by its own velocity, from epoch 0 on (trapezoid)
+    carried = np.zeros((len(e), 2))
+    carried[1:] = np.cumsum(
+        0.5 * (e.velocity[1:, :2] + e.velocity[:-1, :2]) * np.diff(e.t)[:, None], 0
+    )
+    fwd, left = float(lever_arm_m[0]), float(lever_arm_m[1])
+    starts = sorted(a for a, _ in degraded)
+    out = []
+    for a, b in degraded:
+        # fixes after the next outage would judge two outages' drift as one
+        following = next((s for s in starts if s > a), math.inf)
+        inside = np.flatnonzero((e.t >= a) & (e.t < b))
+        accepted = np.flatnonzero((e.t >= b) & (e.t < following) & e.gnss_used)
+        accepted = accepted[accepted > 0]
+        if len(inside) == 0 or len(accepted) == 0:
+            continue
+        k_end = int(inside[-1])
+        chosen: list[tuple[int, int]] = []
+        for k in accepted.tolist():
+            if e.t[k] > e.t[accepted[0]] + EXIT_SPAN_S:
+                break
+            span = np.flatnonzero((fix_t > e.t[k - 1]) & (fix_t <= e.t[k]))
+            if len(span):
+                chosen.append((int(span[-1]), k))
+        if not chosen:
+            continue
+        errors = []
+        for i, k in chosen:
+            yaw = float(e.attitude[k - 1, 2])
+            c, s = math.cos(yaw), math.sin(yaw)
+            lever = np.array([c * fwd - s * left, s * fwd + c * left])
+            # the estimate at the fix: its place at the outage's end, moved by its velocity
+            moved = (
+                np.array([np.interp(fix_t[i], e.t, carried[:, j]) for j in range(2)])
+                - carried[k_end]
+            )
+            errors.append(e.position[k_end, :2] + moved + lever - fix_pos[i, :2])
+        idx = [i for i, _ in chosen]
+        cov_en = float(e.position_cov_en[k_end])
+        var_e, var_n = (float(v) ** 2 for v in e.position_sigma[k_end, :2])
+        fv = np.median(np.asarray(fix_var, np.float64)[idx, :2], axis=0)
+        out.append(
+            OutageExit(
+                start=float(a),
+                end=float(b),
+                fix_t=(float(fix_t[idx[0]]), float(fix_t[idx[-1]])),
+                n_fixes=len(idx),
+                error=np.median(np.asarray(errors), axis=0),
+                estimate_cov=np.array([[var_e, cov_en], [cov_en, var_n]]),
+                fix_cov=np.diag(fv),
+            )
+        )
+    return tuple(out)
+
+
+def _when(x: OutageExit, t0: float) -> str:
+    return f"the outage at {x.start - t0:.1f}-{x.end - t0:.1f} s"
+
+
+def exit_notes(run: Run) -> list[str]:
+    """One line per outage the run came out of: how far its estimate ended from the returning
+    fixes, against what it claimed."""
+    return [
+        f"exit of {_when(x, run.t0)}: the first {x.n_fixes} fixes after it "
+        f"({x.fix_t[0] - run.t0:.1f}-{x.fix_t[1] - run.t0:.1f} s) were {x.distance_m:.1f} m from "
+        f"the estimate, {math.sqrt(x.chi2):.1f} sigma (the estimate claimed "
+        f"{x.estimate_sigma_m:.1f} m that way)"
+        for x in run.exits
+    ]
+
+
+def exit_warnings(
+    method: str, exits: Sequence[OutageExit], route_updated: Sequence[bool], t0: float
+) -> tuple[str, ...]:
+    """One line per outage whose estimate ended farther from the returning fixes than it and
+    they claim (:attr:`~estimator.results.OutageExit.overconfident`), naming the ``method``
+    (``routefuse run`` prints every method's warnings together). ``route_updated``: per exit,
+    whether route updates were applied in its outage (what went wrong differs)."""
+    lines = []
+    for x, routed in zip(exits, route_updated, strict=True):
+        if not x.overconfident:
+            continue
+        why = (
+            "its route updates pulled it off without knowing it (a map drawn off the road, "
+            "a wrong match): check the route's placement and the matches"
+            if routed
+            else "dead reckoning drifted beyond its noise model (IMU noise or biases "
+            "larger than configured, a wrong mounting)"
+        )
+        lines.append(
+            f"{method} run: {_when(x, t0)} ended {x.distance_m:.1f} m from the fixes after it, "
+            f"{math.sqrt(x.chi2):.1f} sigma, where the estimate claimed "
+            f"{x.estimate_sigma_m:.1f} m: {why}"
+        )
+    return tuple(lines)

@@ -1,0 +1,69 @@
+"""The monaco sample on its route drawn 10 m north of the road, in headless Chromium. With
+the map's bias unlearned and the separation from dead reckoning unwatched
+(``extensions.map_bias`` and ``extensions.dr_separation`` off), every route update follows
+the wrong map and the run leaves the tunnel 10 m from the returning fixes under a sigma of
+well under a metre: the page must say so in its warnings, where a user without ground truth
+looks. With the defaults, the same outage's exit is a note, within its sigmas. With
+ROUTEFUSE_UPDATE_SCREENSHOT=1 the screenshot replaces docs/exit_check.png."""
+
+from __future__ import annotations
+
+import os
+import shutil
+from pathlib import Path
+
+import pytest
+from _browser import panel_screenshot, route_moved_north, served, session_page
+
+from estimator.params import Params, with_values
+
+pytestmark = pytest.mark.e2e
+
+REPO = Path(__file__).resolve().parents[2]
+VIEWPORT = {"width": 1400, "height": 1100}
+TRUSTING = {"extensions.map_bias": False, "extensions.dr_separation": False}
+
+
+@pytest.fixture
+def route_10m_north(tmp_path):
+    return route_moved_north(
+        REPO / "sample_logs" / "monaco_tunnel.route.geojson",
+        0.00009,
+        tmp_path / "monaco_10m_north.route.geojson",
+    )
+
+
+def test_an_outage_that_followed_a_wrong_map_is_named_on_the_page(
+    browser, tmp_path, route_10m_north
+):
+    log = REPO / "sample_logs" / "monaco_tunnel.mcap"
+    params = with_values(Params(), TRUSTING)
+    with served(log, route_10m_north, params=params) as (server, controller, app):
+        run = controller.session.proposed
+        (x,) = run.exits
+        assert x.overconfident and x.distance_m > 8.0 and x.estimate_sigma_m < 1.0
+        (line,) = [w for w in run.warnings if "m from the fixes after it" in w]
+        page, view = session_page(browser, server, app, VIEWPORT)
+        text = page.inner_text("body")
+        assert line in text, text[:2000]
+        assert "its route updates pulled it off without knowing it" in text
+        assert "exit of the outage at 108.4-224.4 s" in text
+        shot = tmp_path / "exit_check.png"
+        view.seek(226.0)
+        panel_screenshot(page, shot)
+        page.close()
+    if os.environ.get("ROUTEFUSE_UPDATE_SCREENSHOT") == "1":
+        shutil.move(shot, REPO / "docs" / "exit_check.png")
+
+
+def test_with_the_defaults_the_same_exit_is_a_note(browser, route_10m_north):
+    log = REPO / "sample_logs" / "monaco_tunnel.mcap"
+    with served(log, route_10m_north) as (server, controller, app):
+        run = controller.session.proposed
+        (x,) = run.exits
+        assert not x.overconfident
+        assert not [w for w in run.warnings if "from the fixes after it" in w]
+        page, _ = session_page(browser, server, app, VIEWPORT)
+        text = page.inner_text("body")
+        assert f"were {x.distance_m:.1f} m from the estimate" in text, text[:2000]
+        page.close()
