@@ -142,6 +142,8 @@ def run_case(
             row[f"{label}_truth_rmse_m"] = None if rmse is None else round(float(rmse), 3)
             row[f"{label}_accepted"] = sum(m.accepted for m in run.matches)
             row[f"{label}_attempted"] = len(run.matches)
+            row[f"{label}_exits"] = len(run.exits)
+            row[f"{label}_exits_overconfident"] = sum(x.overconfident for x in run.exits)
         b, r = row["baseline_truth_rmse_m"], row["routefuse_truth_rmse_m"]
         row["routefuse_le_baseline"] = bool(np.isfinite(b) and np.isfinite(r) and r <= b)
     except Exception as exc:  # a failing case is a row, not the end of the table
@@ -176,9 +178,13 @@ def table(rows: list[dict[str, Any]]) -> str:
             continue
         better = sum(r["routefuse_le_baseline"] for r in group)
         before = sum(r["no_caution_truth_rmse_m"] <= r["baseline_truth_rmse_m"] for r in group)
+        flagged = {k: sum(r[f"{k}_exits_overconfident"] for r in group) for k in RUNS}
+        exits = sum(r["routefuse_exits"] for r in group)
         lines.append(
             f"- {name}: routefuse <= baseline on **{better} of {len(group)}** "
-            f"(with `no_wheel_caution` off: {before} of {len(group)})"
+            f"(with `no_wheel_caution` off: {before} of {len(group)}); outages ended beyond "
+            f"their sigmas (the exit check): baseline {flagged['baseline']}, routefuse "
+            f"{flagged['routefuse']} of {exits}"
         )
     failed = [r for r in rows if r["error"]]
     if failed:
@@ -189,8 +195,9 @@ def table(rows: list[dict[str, Any]]) -> str:
     lines += [
         "",
         "| case | outage | faults | baseline [m] | routefuse [m] | <= baseline | "
-        "`no_wheel_caution` off [m] | matches accepted / attempted |",
-        "|---|---|---|---|---|---|---|---|",
+        "`no_wheel_caution` off [m] | matches accepted / attempted | exits beyond their "
+        "sigmas, baseline / routefuse |",
+        "|---|---|---|---|---|---|---|---|---|",
     ]
     for r in ok:
         lines.append(
@@ -198,7 +205,9 @@ def table(rows: list[dict[str, Any]]) -> str:
             f"| {_f(r['routefuse_truth_rmse_m'])} | "
             f"{'yes' if r['routefuse_le_baseline'] else '**no**'} | "
             f"{_f(r['no_caution_truth_rmse_m'])} | "
-            f"{r['routefuse_accepted']} / {r['routefuse_attempted']} |"
+            f"{r['routefuse_accepted']} / {r['routefuse_attempted']} | "
+            f"{r['baseline_exits_overconfident']} / {r['routefuse_exits_overconfident']} "
+            f"of {r['routefuse_exits']} |"
         )
     return "\n".join(lines)
 

@@ -21,6 +21,9 @@ from estimator.results import Epochs, OutageExit, Run
 
 F64 = NDArray[np.float64]
 
+EXITS_NAMED = 5
+"""warning lines about outages that ended beyond their sigmas: the first four named, the rest in
+one line (a log cut into dozens of outages must not bury its other warnings)"""
 EXIT_SPAN_S = 3.0
 """the fixes accepted within this long of the first are compared (their median): one fix is
 one multipath jump away from a false alarm, and a receiver holds a jump for about a second"""
@@ -120,10 +123,9 @@ def exit_warnings(
     they claim (:attr:`~estimator.results.OutageExit.overconfident`), naming the ``method``
     (``routefuse run`` prints every method's warnings together). ``route_updated``: per exit,
     whether route updates were applied in its outage (what went wrong differs)."""
+    flagged = [(x, r) for x, r in zip(exits, route_updated, strict=True) if x.overconfident]
     lines = []
-    for x, routed in zip(exits, route_updated, strict=True):
-        if not x.overconfident:
-            continue
+    for x, routed in flagged[: EXITS_NAMED - 1] if len(flagged) > EXITS_NAMED else flagged:
         why = (
             "its route updates pulled it off without knowing it (a map drawn off the road, "
             "a wrong match): check the route's placement and the matches"
@@ -135,5 +137,14 @@ def exit_warnings(
             f"{method} run: {_when(x, t0)} ended {x.distance_m:.1f} m from the fixes after it, "
             f"{math.sqrt(x.chi2):.1f} sigma, where the estimate claimed "
             f"{x.estimate_sigma_m:.1f} m: {why}"
+        )
+    rest = [x for x, _ in flagged[len(lines) :]]
+    if rest:
+        worst = max(rest, key=lambda x: x.chi2)
+        lines.append(
+            f"... and {len(rest)} more outages of the {method} run, between "
+            f"{rest[0].start - t0:.1f} and {rest[-1].end - t0:.1f} s, ended farther from the "
+            f"fixes after them than their sigmas allow (worst: {_when(worst, t0)}, "
+            f"{worst.distance_m:.1f} m, {math.sqrt(worst.chi2):.1f} sigma)"
         )
     return tuple(lines)

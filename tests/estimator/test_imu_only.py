@@ -408,6 +408,27 @@ def test_the_scripts_values_reach_routefuse_or_with_everywhere_every_run() -> No
         assert run_values_of(label, own, None, everywhere=True) == own
 
 
+def test_the_scripts_table_counts_the_outages_flagged_at_their_exit() -> None:
+    import sys
+    from pathlib import Path
+
+    sys.path.insert(0, str(Path(__file__).resolve().parents[2] / "scripts"))
+    from imu_only import RUNS, table
+
+    def row(case: str, flagged: dict[str, int]) -> dict[str, object]:
+        r: dict[str, object] = {"kind": "sim", "case": case, "outage": "tunnels", "faults": ""}
+        r.update(error="", routefuse_le_baseline=True)
+        for label in RUNS:
+            r.update({f"{label}_truth_rmse_m": 1.0, f"{label}_accepted": 0})
+            r.update({f"{label}_attempted": 0, f"{label}_exits": 2})
+            r[f"{label}_exits_overconfident"] = flagged.get(label, 0)
+        return r
+
+    text = table([row("sim 0", {"baseline": 1}), row("sim 1", {"baseline": 2, "routefuse": 1})])
+    assert "their sigmas (the exit check): baseline 3, routefuse 1 of 4" in text
+    assert text.splitlines()[-1].endswith("| 2 / 1 of 2 |")
+
+
 def test_a_correction_the_widened_search_found_is_not_capped_at_30_m() -> None:
     """A corner dead-reckoned 70 m short along the road, the filter claiming 60 m per axis:
     the widened search (180 m) finds the corner, and the fixed 30 m cap refused that correction

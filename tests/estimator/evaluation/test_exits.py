@@ -112,6 +112,24 @@ def test_fixes_after_the_next_outage_do_not_judge_this_one() -> None:
     assert (x.start, x.end) == second
 
 
+def test_dozens_of_flagged_outages_are_a_few_lines() -> None:
+    from estimator.evaluation.exits import EXITS_NAMED, exit_warnings
+
+    ep = drive(10.0, 1.0)
+    (x,) = outage_exits(ep, [OUTAGE], *fixes(), (0.0, 0.0, 0.0))
+    many = [dataclasses.replace(x, start=x.start + 30 * i, end=x.end + 30 * i) for i in range(12)]
+    worst = dataclasses.replace(many[9], error=np.array([0.0, 30.0]))
+    many[9] = worst
+    lines = exit_warnings("baseline", many, [False] * 12, T0)
+    assert len(lines) == EXITS_NAMED
+    assert all(w.startswith("baseline run: the outage at ") for w in lines[:-1])
+    assert "dead reckoning drifted beyond its noise model" in lines[0]
+    assert lines[-1].startswith("... and 8 more outages of the baseline run, between 130.0 ")
+    assert "worst: the outage at 280.0-290.0 s, 30.0 m, " in lines[-1]
+    assert all(len(w) <= 300 for w in lines)
+    assert exit_warnings("proposed", many[:5], [True] * 5, T0)[4].startswith("proposed run: ")
+
+
 @pytest.fixture(scope="module")
 def long_tunnel_runs() -> dict[str, Run]:
     inp = open_inputs(SAMPLE, SAMPLE.with_name("long_tunnel.route.geojson"))

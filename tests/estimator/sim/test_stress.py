@@ -76,6 +76,8 @@ def test_the_runner_gives_a_row_of_finite_figures() -> None:
     for label in RUNS:
         assert np.isfinite(row[f"{label}_truth_rmse_m"]) and np.isfinite(row[f"{label}_nees_mean"])
     assert "| all (1) | baseline |" in summary([row])
+    assert row["routefuse_exits"] == 1 and row["routefuse_exits_overconfident"] == 0
+    assert summary([row]).splitlines()[4].endswith("| 0 of 1 |")
     held = run_drive(1, corpus=1)
     assert (held["corpus"], row["corpus"]) == (1, 0)
     assert held["bias_rotation_deg"] != row["bias_rotation_deg"]

@@ -89,6 +89,7 @@ def test_the_status_line_lists_the_logs_warnings_escaped_and_bounded():
             degraded_intervals=(),
             matches=(),
             dropped_fix_times=(),
+            exits=(),
         ),
     )
     line = status_markdown(session)  # type: ignore[arg-type]
