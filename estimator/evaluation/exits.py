@@ -7,7 +7,9 @@ under a small claimed sigma. The fixes compared are the first ones the filter it
 after the outage (its robust GNSS test drops the multipath jumps at a portal, and after a gap
 takes fixes once they agree with each other), and the estimate is carried on to each from the
 outage's end by the run's own velocity, so the position jumps their updates make play no
-part."""
+part. It is judged by the covariance it claimed at the outage's end, the claim the outage's
+updates left: the seconds of dead reckoning before the filter trusts fixes again count against
+it (without wheel speed a poor velocity then adds metres, and the check leans to flagging)."""
 
 from __future__ import annotations
 
