@@ -129,16 +129,16 @@ def exit_warnings(
     lines = []
     for x, routed in flagged[: EXITS_NAMED - 1] if len(flagged) > EXITS_NAMED else flagged:
         why = (
-            "its route updates pulled it off without knowing it (a map drawn off the road, "
-            "a wrong match): check the route's placement and the matches"
+            "the route updates pulled it off unnoticed (a map off the road, a wrong match: "
+            "check the route and the matches)"
             if routed
-            else "dead reckoning drifted beyond its noise model (IMU noise or biases "
-            "larger than configured, a wrong mounting)"
+            else "dead reckoning drifted beyond its noise model (IMU noise, biases or "
+            "mounting worse than configured)"
         )
         lines.append(
             f"{method} run: {_when(x, t0)} ended {x.distance_m:.1f} m from the fixes after it, "
             f"{math.sqrt(x.chi2):.1f} sigma, where the estimate claimed "
-            f"{x.estimate_sigma_m:.1f} m: {why}"
+            f"{x.estimate_sigma_m:.1f} m: {why}, or the fixes are worse than they claim"
         )
     rest = [x for x, _ in flagged[len(lines) :]]
     if rest:

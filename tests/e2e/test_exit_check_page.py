@@ -46,7 +46,7 @@ def test_an_outage_that_followed_a_wrong_map_is_named_on_the_page(
         page, view = session_page(browser, server, app, VIEWPORT)
         text = page.inner_text("body")
         assert line in text, text[:2000]
-        assert "its route updates pulled it off without knowing it" in text
+        assert "the route updates pulled it off unnoticed" in text
         assert "exit of the outage at 108.4-224.4 s" in text
         shot = tmp_path / "exit_check.png"
         view.seek(226.0)
