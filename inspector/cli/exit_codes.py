@@ -13,6 +13,7 @@ class ExitCode(IntEnum):
     USAGE = 2
     REFUSED = 3
     SOME_FAILED = 4
+    EXIT_CHECK_FAILED = 5
     INTERRUPTED = 130
 
 
@@ -25,6 +26,8 @@ MEANINGS: dict[ExitCode, str] = {
     "<problem>' (an unreadable log or route, an ambiguous topic or route line, a bad value)",
     ExitCode.SOME_FAILED: "ran to the end, but some logs or items failed (sweep, export "
     "--batch, bench): the table or summary is written and names them",
+    ExitCode.EXIT_CHECK_FAILED: "run --check-exits: routefuse ended an outage farther from the "
+    "fixes after it than its sigmas allow (a warning names it); the results are written",
     ExitCode.INTERRUPTED: "interrupted (Ctrl-C)",
 }
 

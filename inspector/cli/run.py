@@ -15,6 +15,7 @@ from estimator.errors import RoutefuseError
 from estimator.io import LOG_FORMATS_TEXT, ROUTE_FORMATS_TEXT, TopicChoice
 from estimator.params import Method
 from inspector.cli.checks import check_log, check_output_file, route_for
+from inspector.cli.exit_codes import ExitCode
 from inspector.cli.options import (
     add_outage_option,
     add_param_options,
@@ -62,6 +63,13 @@ def add_arguments(parser: argparse.ArgumentParser) -> None:
         "--subtract-lane-offset",
         action="store_true",
         help="measure route deviations from the learned lane instead of the route line",
+    )
+    parser.add_argument(
+        "--check-exits",
+        action="store_true",
+        help="exit with status 5 when routefuse's estimate (--method proposed) ended an outage "
+        "farther from the fixes after it than its sigmas allow: a gate for CI over logs "
+        "without ground truth (docs/integrity.md, 'The exit check')",
     )
     parser.add_argument(
         "--quiet", action="store_true", help="no progress on stderr (errors still print)"
@@ -153,6 +161,8 @@ def execute(args: argparse.Namespace) -> int:
     params = params_from_args(args)
     outages = [parse_outage(o) for o in args.outage]
     methods: list[Method] = list(dict.fromkeys(args.method or ("baseline", "proposed")))
+    if args.check_exits and "proposed" not in methods:
+        raise RoutefuseError("--check-exits", "checks routefuse's run: add proposed to --method")
     # the inputs' and outputs' problems before any work: the log's own first, then the route's
     # (given or beside the log), then the output files' folders
     route_path = route_for(check_log(args.log), args.route)
@@ -199,7 +209,9 @@ def execute(args: argparse.Namespace) -> int:
             raise RoutefuseError(args.json, f"cannot write: {exc.strerror or exc}") from None
     if args.csv is not None:
         _write_csv(args.csv, named.values())
-    return 0
+    if args.check_exits and any(x.overconfident for x in named["proposed"].exits):
+        return ExitCode.EXIT_CHECK_FAILED
+    return ExitCode.OK
 
 
 NO_TRUTH = (

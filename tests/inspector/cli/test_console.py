@@ -49,7 +49,7 @@ def test_a_usage_error_and_a_refused_file_have_different_exit_codes(tmp_path: Pa
     assert usage.stderr.startswith("usage: ")
     assert refused.stderr.startswith("routefuse: error: ")
     listed = _console("--help", cwd=tmp_path).stdout.split("exit codes:")[1].split()
-    assert [word for word in listed if word.isdigit()] == ["0", "1", "2", "3", "4", "130"]
+    assert [word for word in listed if word.isdigit()] == ["0", "1", "2", "3", "4", "5", "130"]
 
 
 def test_version_prints_the_installed_version_and_exits_0(tmp_path: Path) -> None:

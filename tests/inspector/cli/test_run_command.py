@@ -266,3 +266,31 @@ def test_a_log_without_truth_says_the_table_is_route_deviation_only(bag, tmp_pat
     )
     assert main(["run", str(log), "--route", str(route), "--quiet"]) == 0
     assert "no ground truth" not in capsys.readouterr().out
+
+
+def test_check_exits_fails_a_run_that_followed_a_wrong_map(tmp_path, capsys):
+    """The monaco sample on its route drawn 10 m north, with the map's bias unlearned and the
+    separation from dead reckoning unwatched: every route update follows the wrong map, and
+    ``--check-exits`` turns the exit warning into status 5 for CI; with the defaults the same
+    map passes. Without proposed among the methods there is nothing to check: refused."""
+    from inspector.cli.exit_codes import ExitCode
+
+    samples = Path(__file__).resolve().parents[3] / "sample_logs"
+    data = json.loads((samples / "monaco_tunnel.route.geojson").read_text(encoding="utf-8"))
+    for feature in data["features"]:
+        feature["geometry"]["coordinates"] = [
+            [lon, lat + 0.00009, *rest] for lon, lat, *rest in feature["geometry"]["coordinates"]
+        ]
+    route = tmp_path / "north.route.geojson"
+    route.write_text(json.dumps(data), encoding="utf-8")
+    log = str(samples / "monaco_tunnel.mcap")
+    trusting = ["--set", "extensions.map_bias=false", "--set", "extensions.dr_separation=false"]
+    argv = ["run", log, "--route", str(route), "--quiet", "--check-exits"]
+    out = tmp_path / "run.json"
+    assert main([*argv, *trusting, "--json", str(out)]) == ExitCode.EXIT_CHECK_FAILED
+    err = capsys.readouterr().err
+    assert "proposed run: the outage at 108.4-224.4 s ended " in err
+    assert [x["overconfident"] for x in json.loads(out.read_text())["exits"]["proposed"]] == [True]
+    assert main(argv) == ExitCode.OK
+    assert main([*argv, "--method", "baseline"]) == ExitCode.REFUSED
+    assert "routefuse: error: --check-exits: " in capsys.readouterr().err
