@@ -105,6 +105,7 @@ def report_html(
         _distributions(plan, ok),
         _ranked(plan, ok, layout, base, metric),
         *_per_log(plan, ok, metric),
+        _overconfident(plan, ok, layout),
         _failures(failed),
         "</body></html>\n",
     ]
@@ -349,6 +350,42 @@ def _delta_table(
         f"<h2>{esc(heading)}</h2>" + (f"<p>{esc(note)}</p>" if note else "") + "<table><tr>"
         f"<th>log</th><th>{esc(_short(ref_name))} [m]</th>"
         f"{head}</tr>\n" + "\n".join(body) + "</table>" + more
+    )
+
+
+def _overconfident(plan: SweepPlan, ok: Sequence[Mapping[str, Any]], layout: SweepLayout) -> str:
+    """The tasks with an outage that ended farther from the fixes after it than its sigmas allow
+    (the exit check, ``exits_overconfident``), worst first, each with the command that opens it
+    in the inspector: on logs without ground truth, the one sign that a run was confidently
+    wrong (or its receiver's fixes worse than they claim)."""
+    esc = html.escape
+    slugs = {s.name: s.slug for s in plan.sets}
+    flagged = [r for r in ok if (r.get("exits_overconfident") or 0) > 0]
+    intro = (
+        "<h2>Outages that ended beyond their sigmas</h2><p>The exit check: where each outage's "
+        "estimate ended against the fixes that came back after it, a chi-square of 2 degrees of "
+        "freedom over 13.8 (once in a thousand outages when the estimate and the fixes are as "
+        "good as they claim)."
+    )
+    if not flagged:
+        return intro + " None.</p>"
+    flagged.sort(key=lambda r: -(r.get("exit_chi2_max") or 0.0))
+    body = "\n".join(
+        f"<tr><td>{esc(r['label'])}</td><td>{esc(r['set'])}</td>"
+        f"<td class='num'>{int(r['exits_overconfident'])} of {int(r.get('exits') or 0)}</td>"
+        f"<td class='num'>{_num(math.sqrt(r.get('exit_chi2_max') or 0.0), 1)}</td>"
+        f"<td><code>{esc(serve_command(r, layout.set_config(slugs[r['set']])))}</code></td></tr>"
+        for r in flagged[:MAX_DELTA_ROWS]
+    )
+    more = (
+        f"<p>{len(flagged) - MAX_DELTA_ROWS} more in results.parquet.</p>"
+        if len(flagged) > MAX_DELTA_ROWS
+        else ""
+    )
+    return (
+        f"{intro} {len(flagged)} tasks.</p><table><tr><th>log</th><th>set</th>"
+        "<th>outages flagged</th><th>worst [sigma]</th><th>open it</th></tr>\n"
+        f"{body}</table>{more}"
     )
 
 

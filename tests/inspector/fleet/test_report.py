@@ -71,3 +71,32 @@ def test_without_truth_anywhere_the_report_warns_the_route_deviation_is_all_ther
     page = report_html(plan, rows, layout=SweepLayout(tmp_path), base=tmp_path)
     assert "No log has ground truth" in page
     assert "Per log: change of position deviation RMSE [m]" in page
+
+
+def test_the_outages_that_ended_beyond_their_sigmas_are_listed_worst_first(tmp_path):
+    """A fleet user without ground truth sorts nothing by hand: the tasks whose exit check
+    flagged an outage are listed, worst first, with the command that opens each, escaped."""
+    plan = _plan(tmp_path, "calm", "<b>wrong map</b>", "worse")
+    rows = _rows(
+        plan,
+        {
+            label: {"proposed": (None, 1.0), "paper": (None, 1.0)}
+            for label in ("calm", "<b>wrong map</b>", "worse")
+        },
+    )
+    flags = {("<b>wrong map</b>", "proposed"): (1, 3, 25.0), ("worse", "paper"): (2, 3, 400.0)}
+    for r in rows:
+        n, total, chi2 = flags.get((r["label"], r["set"]), (0, 3, 1.0))
+        r.update(exits_overconfident=n, exits=total, exit_chi2_max=chi2)
+    page = report_html(plan, rows, layout=SweepLayout(tmp_path), base=tmp_path)
+    section = page.split("<h2>Outages that ended beyond their sigmas</h2>", 1)[1]
+    section = section.split("<h2>", 1)[0]
+    assert "2 tasks." in section
+    worse, wrong = section.index("<td>worse</td>"), section.index("&lt;b&gt;wrong map&lt;/b&gt;")
+    assert worse < wrong and "<b>wrong map</b>" not in section
+    assert "<td class='num'>2 of 3</td><td class='num'>20.0</td>" in section
+    assert "<td class='num'>1 of 3</td><td class='num'>5.0</td>" in section
+    assert "routefuse serve " in section and "calm" not in section
+    quiet = [{**r, "exits_overconfident": 0} for r in rows]
+    page = report_html(plan, quiet, layout=SweepLayout(tmp_path), base=tmp_path)
+    assert "as good as they claim). None.</p>" in page
