@@ -44,7 +44,7 @@ def ranking_metric(rows: Sequence[Mapping[str, Any]]) -> str:
 _COLUMNS = (
     "task_id", "log", "label", "route", "outages", "set", "set_index", "method", "status",
     "error", "export_dir", "total_s", "worker_peak_rss_mb", "matches_attempted",
-    "matches_accepted", *KEY_METRICS,
+    "matches_accepted", "exits", "exits_overconfident", "exit_chi2_max", *KEY_METRICS,
 )  # fmt: skip
 _TITLES = {
     "rmse_pos_dev_m": "position deviation RMSE [m]",
@@ -383,7 +383,8 @@ def _overconfident(plan: SweepPlan, ok: Sequence[Mapping[str, Any]], layout: Swe
         else ""
     )
     return (
-        f"{intro} {len(flagged)} tasks.</p><table><tr><th>log</th><th>set</th>"
+        f"{intro} {len(flagged)} task{'s' if len(flagged) > 1 else ''}.</p><table><tr>"
+        "<th>log</th><th>set</th>"
         "<th>outages flagged</th><th>worst [sigma]</th><th>open it</th></tr>\n"
         f"{body}</table>{more}"
     )

@@ -4,10 +4,13 @@ from __future__ import annotations
 
 from pathlib import Path
 
+import pyarrow as pa
+import pyarrow.parquet as pq
+
 from inspector.fleet import SweepPlan, build_sets
 from inspector.fleet.engine import SweepLayout
 from inspector.fleet.plan import LogEntry
-from inspector.fleet.report import report_html
+from inspector.fleet.report import report_html, write_report
 
 
 def _rows(plan: SweepPlan, figures: dict[str, dict[str, tuple[float | None, float]]]):
@@ -88,7 +91,10 @@ def test_the_outages_that_ended_beyond_their_sigmas_are_listed_worst_first(tmp_p
     for r in rows:
         n, total, chi2 = flags.get((r["label"], r["set"]), (0, 3, 1.0))
         r.update(exits_overconfident=n, exits=total, exit_chi2_max=chi2)
-    page = report_html(plan, rows, layout=SweepLayout(tmp_path), base=tmp_path)
+    # through the table file, as a sweep writes it and the report reads it back
+    parquet = tmp_path / "results.parquet"
+    pq.write_table(pa.Table.from_pylist(rows), parquet)
+    page = write_report(plan, SweepLayout(tmp_path), parquet).read_text(encoding="utf-8")
     section = page.split("<h2>Outages that ended beyond their sigmas</h2>", 1)[1]
     section = section.split("<h2>", 1)[0]
     assert "2 tasks." in section
