@@ -522,6 +522,29 @@ def _html_table(methods: dict[str, dict[str, Any]], group: str, caption: str) ->
     )
 
 
+def _exits_table(doc: dict[str, Any]) -> str:
+    """Where each outage's estimate ended against the fixes after it, per method (the exit
+    check; bold beyond its sigmas), or "" when no outage was followed by fixes."""
+    esc = html.escape
+    rows = ""
+    for method, exits in doc.get("exits", {}).items():
+        for x in exits:
+            a, b = x["outage"]
+            cells = f"{x['distance_m']:.2f}</td><td>{x['estimate_sigma_m']:.2f}</td><td>"
+            sigmas = f"{x['chi2'] ** 0.5:.1f}"
+            cells += f"<b>{sigmas}</b>" if x["overconfident"] else sigmas
+            rows += f"<tr><td>{esc(method)}</td><td>{a:.1f}–{b:.1f}</td><td>{cells}</td></tr>\n"
+    if not rows:
+        return ""
+    return (
+        "<table><caption>Where each outage ended: the estimate against the fixes after it "
+        "(bold: beyond 99.9 % of what the estimate and the fixes claim)</caption>\n"
+        "<tr><th>method</th><th>outage [s]</th><th>distance [m]</th>"
+        "<th>estimate's sigma that way [m]</th><th>sigmas</th></tr>\n"
+        f"{rows}</table>\n"
+    )
+
+
 def _replay_legend() -> str:
     """The replay's colours (it has no legend of its own), from the scene layers."""
     from inspector.layers import legend_entries, legend_html
@@ -549,6 +572,7 @@ def write_report(
     )
     if any(m.get("truth") for m in methods.values()):
         tables += _html_table(methods, "truth", "Error against ground truth")
+    tables += _exits_table(doc)
     matches = doc["matches"]
     rejected = ", ".join(f"{esc(k)} {v}" for k, v in matches["rejected"].items()) or "none"
     outages = ", ".join(f"{a:.1f}–{b:.1f} s" for a, b in doc["degraded_intervals"]) or "none"

@@ -507,3 +507,22 @@ def test_the_replay_speed_menu_labels_the_exports_own_time_lapse_to_three_figure
     assert f'<option value="{speed:g}" selected>4.45x</option>' in panel
     assert '<option value="5">5x</option>' in panel
     assert "4.44833x" not in panel
+
+
+def test_the_report_gives_each_outages_exit_check(tmp_path):
+    """The long tunnel's results document (its golden): where each method's estimate ended
+    against the fixes after the tunnel, the paper's beyond its sigmas in bold."""
+    from inspector.export.tables import write_report
+
+    golden = Path(__file__).resolve().parents[2] / "golden" / "long_tunnel.json"
+    doc = json.loads(golden.read_text(encoding="utf-8"))["json"]
+    page = write_report(tmp_path, doc, [], {}).read_text(encoding="utf-8")
+    assert "Where each outage ended: the estimate against the fixes after it" in page
+    for method, (x,) in doc["exits"].items():
+        a, b = x["outage"]
+        row = f"<tr><td>{method}</td><td>{a:.1f}–{b:.1f}</td><td>{x['distance_m']:.2f}</td>"
+        assert row in page
+        sigmas = f"{x['chi2'] ** 0.5:.1f}"
+        assert (f"<b>{sigmas}</b>" in page) == x["overconfident"] == (method == "paper")
+    without = {**doc, "exits": {}}
+    assert "Where each outage ended" not in write_report(tmp_path, without, [], {}).read_text()
