@@ -53,24 +53,31 @@ def outage_exits(
         0.5 * (e.velocity[1:, :2] + e.velocity[:-1, :2]) * np.diff(e.t)[:, None], 0
     )
     fwd, left = float(lever_arm_m[0]), float(lever_arm_m[1])
-    starts = sorted(a for a, _ in degraded)
+    starts = np.sort(np.array([a for a, _ in degraded], np.float64))
+    used = np.flatnonzero(e.gnss_used)
+    used = used[used > 0]
     out = []
     for a, b in degraded:
         # fixes after the next outage would judge two outages' drift as one
-        following = next((s for s in starts if s > a), math.inf)
-        inside = np.flatnonzero((e.t >= a) & (e.t < b))
-        accepted = np.flatnonzero((e.t >= b) & (e.t < following) & e.gnss_used)
-        accepted = accepted[accepted > 0]
-        if len(inside) == 0 or len(accepted) == 0:
+        following = starts[np.searchsorted(starts, a, side="right") :]
+        stop = float(following[0]) if len(following) else math.inf
+        k_lo, k_b = np.searchsorted(e.t, [a, b], side="left")
+        if k_b <= k_lo:
             continue
-        k_end = int(inside[-1])
+        k_end = int(k_b) - 1
+        first = used[np.searchsorted(used, k_b) :]
+        if len(first) == 0 or e.t[first[0]] >= stop:
+            continue
+        k_hi = min(
+            np.searchsorted(e.t, e.t[first[0]] + EXIT_SPAN_S, side="right"),
+            np.searchsorted(e.t, stop, side="left"),
+        )
+        accepted = first[: np.searchsorted(first, k_hi)]
         chosen: list[tuple[int, int]] = []
         for k in accepted.tolist():
-            if e.t[k] > e.t[accepted[0]] + EXIT_SPAN_S:
-                break
-            span = np.flatnonzero((fix_t > e.t[k - 1]) & (fix_t <= e.t[k]))
-            if len(span):
-                chosen.append((int(span[-1]), k))
+            lo, hi = np.searchsorted(fix_t, [e.t[k - 1], e.t[k]], side="right")
+            if hi > lo:
+                chosen.append((int(hi) - 1, k))
         if not chosen:
             continue
         errors = []
