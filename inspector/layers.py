@@ -13,6 +13,7 @@ polylines as line segments with screen-space thickness.
 from __future__ import annotations
 
 import html
+import math
 from typing import ClassVar, Literal, TypeVar
 
 import numpy as np
@@ -39,6 +40,8 @@ PAIRS = (170, 170, 170)
 PSEUDO = (220, 30, 140)
 ACCEPTED = (30, 170, 60)
 REJECTED = (220, 40, 40)
+EXIT_WITHIN = (40, 40, 40)
+EXIT_BEYOND = (140, 0, 0)
 
 
 RING_POINTS = 72
@@ -491,6 +494,45 @@ class MatchLayer(Layer):
             self._show(name, on)
 
 
+class ExitLayer(Layer):
+    """Where each outage's estimate ended against the fixes that came back after it (the exit
+    check): at the first fix compared, a line from where the estimate had the vehicle to where
+    the fixes put it (their median offset), dark within the sigmas the estimate claimed and red
+    beyond them, the red ones labelled with their distance and sigmas."""
+
+    key = "exits"
+    label = "outage exits"
+    legend = (
+        (EXIT_WITHIN, "outage exit: the estimate -> the fixes after it"),
+        (EXIT_BEYOND, "the same, beyond the sigmas the estimate claimed"),
+    )
+    z: ClassVar[float] = 0.5
+
+    def set_data(self, data: SceneData) -> None:
+        for flagged, color in ((False, EXIT_WITHIN), (True, EXIT_BEYOND)):
+            exits = [x for x in data.exits if x.overconfident == flagged]
+            name = "beyond" if flagged else "within"
+            ends = np.array([[x.estimate_at, x.estimate_at - x.error] for x in exits])
+            ends = ends.reshape(-1, 2, 2)
+            seg = np.concatenate([ends, np.full((len(ends), 2, 1), self.z)], axis=2)
+            self._lines(name, seg, color, 5.0)
+            self._dots(f"{name}_fixes", ends[:, 1], np.tile(color, (len(ends), 1)), 9.0, self.z)
+            self._show(name, len(exits) > 0)
+            self._show(f"{name}_fixes", len(exits) > 0)
+        for name in [n for n in self._labels if n.startswith("exit_")]:
+            self._labels.pop(name).remove()
+            del self._handles[name]
+            self._wanted.pop(name, None)
+        for i, x in enumerate(e for e in data.exits if e.overconfident):
+            name = f"exit_{i}"
+            text = f"exit {x.distance_m:.1f} m, {math.sqrt(x.chi2):.1f} sigma"
+            position = (*(x.estimate_at - x.error / 2), self.z)
+            label = self.scene.add_label(
+                f"{self.root}/{name}", text, position=position, visible=self._visible
+            )
+            self._keep(name, label, self._labels)
+
+
 LAYER_TYPES: tuple[type[Layer], ...] = (
     RouteLayer,
     GnssLayer,
@@ -498,6 +540,7 @@ LAYER_TYPES: tuple[type[Layer], ...] = (
     BaselineLayer,
     ProposedLayer,
     VerdictLayer,
+    ExitLayer,
     MatchLayer,
 )
 

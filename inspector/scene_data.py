@@ -16,7 +16,7 @@ from numpy.typing import NDArray
 from estimator.evaluation.metrics import NEES_95_2DOF
 from estimator.log import Log
 from estimator.nav.frames import LocalFrame
-from estimator.results import MatchRecord, Run
+from estimator.results import MatchRecord, OutageExit, Run
 from estimator.route import Route
 
 F64 = NDArray[np.float64]
@@ -221,6 +221,8 @@ class SceneData:
     match_xy: F64
     """(A, 2) marker positions"""
     match_accepted: NDArray[np.bool_]
+    exits: tuple[OutageExit, ...]
+    """the proposed run's exit checks: where each outage's estimate ended against the fixes"""
     center: F64
     """(2,) middle of the drawn extent"""
     extent_m: float
@@ -250,6 +252,7 @@ class SceneData:
             match_t=np.array([m.t for m in matches], np.float64),
             match_xy=match_xy,
             match_accepted=np.array([m.accepted for m in matches], bool),
+            exits=proposed.exits,
             center=(lo + hi) / 2,
             extent_m=float(max(np.max(hi - lo), 50.0)),
         )

@@ -102,6 +102,7 @@ def outage_exits(
                 fix_t=(float(fix_t[idx[0]]), float(fix_t[idx[-1]])),
                 n_fixes=len(idx),
                 error=np.median(np.asarray(errors), axis=0),
+                estimate_at=errors[0] + np.asarray(fix_pos, np.float64)[idx[0], :2],
                 estimate_cov=np.array([[var_e, cov_en], [cov_en, var_n]]),
                 fix_cov=np.diag(fv),
             )

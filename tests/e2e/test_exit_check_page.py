@@ -12,6 +12,7 @@ import os
 import shutil
 from pathlib import Path
 
+import numpy as np
 import pytest
 from _browser import panel_screenshot, route_moved_north, served, session_page
 
@@ -48,8 +49,21 @@ def test_an_outage_that_followed_a_wrong_map_is_named_on_the_page(
         assert line in text, text[:2000]
         assert "the route updates pulled it off unnoticed" in text
         assert "exit of the outage at 108.4-224.4 s" in text
+        # on the map: the line from the estimate to the fixes, red and labelled
+        layer = view.layers.layers["exits"]
+        beyond = layer._segments["beyond"].points
+        assert beyond.shape == (1, 2, 3)
+        length = float(np.hypot(*(beyond[0, 0, :2] - beyond[0, 1, :2])))
+        assert length == pytest.approx(x.distance_m, abs=1e-3)
+        (label,) = layer._labels.values()
+        assert label.text == f"exit {x.distance_m:.1f} m, {x.chi2**0.5:.1f} sigma"
+        page.get_by_role("tab", name="Layers").click()
+        assert "outage exits" in page.inner_text("body")
+        page.get_by_role("tab", name="Match").click()
         shot = tmp_path / "exit_check.png"
-        view.seek(226.0)
+        view.seek(232.0)
+        view._focus = (x.estimate_at - x.error / 2, 60.0)  # the camera over the exit
+        view.place_camera()
         panel_screenshot(page, shot)
         page.close()
     if os.environ.get("ROUTEFUSE_UPDATE_SCREENSHOT") == "1":

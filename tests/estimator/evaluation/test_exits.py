@@ -172,6 +172,18 @@ def test_the_exit_is_against_the_fixes_not_the_truth(long_tunnel_runs: dict[str,
 
 
 @pytest.mark.slow
+def test_the_exit_starts_on_the_track_just_before_the_first_fix_moved_it(
+    long_tunnel_runs: dict[str, Run],
+) -> None:
+    for run in long_tunnel_runs.values():
+        (x,) = run.exits
+        e = run.epochs
+        k = int(np.searchsorted(e.t, x.fix_t[0])) - 1  # the last row before that fix's update
+        here = e.position[k, :2] + e.velocity[k, :2] * (x.fix_t[0] - e.t[k])
+        assert float(np.hypot(*(x.estimate_at - here))) < 0.2
+
+
+@pytest.mark.slow
 def test_the_results_document_carries_every_exit(long_tunnel_runs: dict[str, Run]) -> None:
     from estimator.evaluation import method_metrics
 
