@@ -504,7 +504,7 @@ class ExitLayer(Layer):
     label = "outage exits"
     legend = (
         (EXIT_WITHIN, "outage exit: the estimate -> the fixes after it"),
-        (EXIT_BEYOND, "the same, beyond the sigmas the estimate claimed"),
+        (EXIT_BEYOND, "outage exit beyond the sigmas the estimate claimed"),
     )
     z: ClassVar[float] = 0.5
 
