@@ -407,8 +407,10 @@ class OutageExit:
     """(2,) E, N m: the estimate carried on from the outage's end by its own velocity, minus
     the fixes (their median)"""
     estimate_at: F64
-    """(2,) E, N m: where the estimate had the antenna at the first fix compared (its track just
-    before that fix's update moved it), and ``estimate_at - error`` where the fixes put it"""
+    """(2,) E, N m: where the estimate, carried on from the outage's end by its own velocity,
+    had the antenna at the first fix compared, and ``estimate_at - error`` where the fixes put
+    it. It is on the run's track there unless something besides fixes moved the track after
+    the outage (the non-holonomic constraint in a turn, telling a velocity error)"""
     estimate_cov: F64
     """(2, 2) m^2: the E-N covariance the estimate claimed at the outage's end"""
     fix_cov: F64

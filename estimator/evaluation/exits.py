@@ -9,7 +9,11 @@ takes fixes once they agree with each other), and the estimate is carried on to 
 outage's end by the run's own velocity, so the position jumps their updates make play no
 part. It is judged by the covariance it claimed at the outage's end, the claim the outage's
 updates left: the seconds of dead reckoning before the filter trusts fixes again count against
-it (without wheel speed a poor velocity then adds metres, and the check leans to flagging)."""
+it (without wheel speed a poor velocity then adds metres, and the check leans to flagging).
+Taking the estimate and covariance just before the first accepted fix instead was measured and
+not kept: after a multi-tunnel sim's outage (IMU-only sim 6) the non-holonomic constraint in
+the turn after the portal moves the position 109 m before any fix is trusted, and the check
+would then judge the turn, not the outage."""
 
 from __future__ import annotations
 

@@ -175,6 +175,7 @@ def test_the_exit_is_against_the_fixes_not_the_truth(long_tunnel_runs: dict[str,
 def test_the_exit_starts_on_the_track_just_before_the_first_fix_moved_it(
     long_tunnel_runs: dict[str, Run],
 ) -> None:
+    """After the long tunnel the road runs straight: nothing but fixes moves the track."""
     for run in long_tunnel_runs.values():
         (x,) = run.exits
         e = run.epochs
