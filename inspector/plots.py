@@ -227,6 +227,8 @@ def metrics_rows(inputs: Any, baseline: Run, proposed: Run) -> tuple[tuple[str, 
             continue
         base_value, proposed_value = (_fmt(v, digits) for v in values)
         rows.append((label, base_value, proposed_value))
+    base_flagged, flagged = (sum(x.overconfident for x in r.exits) for r in (baseline, proposed))
+    rows.append(("outages ended beyond their sigmas (exit check)", str(base_flagged), str(flagged)))
     summary = match_summary(proposed)
     rejected = summary["rejected"]
     assert isinstance(rejected, dict)

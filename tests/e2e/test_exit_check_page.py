@@ -9,12 +9,13 @@ ROUTEFUSE_UPDATE_SCREENSHOT=1 the screenshot replaces docs/exit_check.png."""
 from __future__ import annotations
 
 import os
+import re
 import shutil
 from pathlib import Path
 
 import numpy as np
 import pytest
-from _browser import panel_screenshot, route_moved_north, served, session_page
+from _browser import panel_screenshot, route_moved_north, served, session_page, wait_until
 
 from estimator.params import Params, with_values
 
@@ -59,6 +60,10 @@ def test_an_outage_that_followed_a_wrong_map_is_named_on_the_page(
         assert label.text == f"exit {x.distance_m:.1f} m, {x.chi2**0.5:.1f} sigma"
         page.get_by_role("tab", name="Layers").click()
         assert "outage exits" in page.inner_text("body")
+        # the Plots tab's table (and the Compare tab's, from the same rows) counts them
+        page.get_by_role("tab", name="Plots").click()
+        row = r"outages ended beyond their sigmas \(exit check\)\s+0\s+1\b"
+        wait_until(lambda: re.search(row, page.inner_text("body")), 20, "the exit row")
         page.get_by_role("tab", name="Match").click()
         shot = tmp_path / "exit_check.png"
         view.seek(232.0)
