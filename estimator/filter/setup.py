@@ -404,7 +404,7 @@ def _wheel_arrays(log: Log, s: SensorParams, warnings: list[str]) -> tuple[F64, 
 def fix_wander_var(cfg: F64) -> F64:
     """(3,) E, N, U m^2: the stationary variance of the GNSS wander state that
     :func:`prepare_inputs` took out of each fix's variance (``FilterInputs.gnss_var`` plus
-    this is a fix's whole variance)."""
+    this is a fix's whole variance, or more where the white rest was raised to the floor)."""
     tau = float(cfg[C_TAU_W])
     var: F64 = np.array([cfg[C_QW_H], cfg[C_QW_H], cfg[C_QW_V]]) * tau / 2.0
     return var

@@ -12,7 +12,7 @@ import pytest
 from estimator.evaluation import results_document, run_notes
 from estimator.evaluation.exits import outage_exits
 from estimator.params import Params
-from estimator.pipeline import open_inputs, run_methods
+from estimator.pipeline import Inputs, open_inputs, run_methods
 from estimator.results import EXIT_CHI2_2DOF, Epochs, Run
 
 SAMPLE = Path(__file__).resolve().parents[3] / "sample_logs" / "long_tunnel.mcap"
@@ -131,9 +131,13 @@ def test_dozens_of_flagged_outages_are_a_few_lines() -> None:
 
 
 @pytest.fixture(scope="module")
-def long_tunnel_runs() -> dict[str, Run]:
-    inp = open_inputs(SAMPLE, SAMPLE.with_name("long_tunnel.route.geojson"))
-    runs = run_methods(inp, Params(), methods=("baseline", "proposed", "paper"))
+def long_tunnel() -> Inputs:
+    return open_inputs(SAMPLE, SAMPLE.with_name("long_tunnel.route.geojson"))
+
+
+@pytest.fixture(scope="module")
+def long_tunnel_runs(long_tunnel: Inputs) -> dict[str, Run]:
+    runs = run_methods(long_tunnel, Params(), methods=("baseline", "proposed", "paper"))
     return {m: runs[m] for m in ("baseline", "proposed", "paper")}
 
 
@@ -156,11 +160,12 @@ def test_the_papers_confident_exit_is_a_warning_and_routefuses_is_a_note(
 
 
 @pytest.mark.slow
-def test_the_exit_is_against_the_fixes_not_the_truth(long_tunnel_runs: dict[str, Run]) -> None:
+def test_the_exit_is_against_the_fixes_not_the_truth(
+    long_tunnel: Inputs, long_tunnel_runs: dict[str, Run]
+) -> None:
     """On the simulator's log the fixes after the tunnel are within their few metres of the
     truth: the exit's distance is the estimate's error there, give or take them."""
-    inp = open_inputs(SAMPLE, SAMPLE.with_name("long_tunnel.route.geojson"))
-    log = inp.log
+    log = long_tunnel.log
     assert log.truth is not None
     for run in long_tunnel_runs.values():
         (x,) = run.exits
@@ -185,11 +190,12 @@ def test_the_exit_starts_on_the_track_just_before_the_first_fix_moved_it(
 
 
 @pytest.mark.slow
-def test_the_results_document_carries_every_exit(long_tunnel_runs: dict[str, Run]) -> None:
+def test_the_results_document_carries_every_exit(
+    long_tunnel: Inputs, long_tunnel_runs: dict[str, Run]
+) -> None:
     from estimator.evaluation import method_metrics
 
-    runs = long_tunnel_runs
-    inp = open_inputs(SAMPLE, SAMPLE.with_name("long_tunnel.route.geojson"))
+    runs, inp = long_tunnel_runs, long_tunnel
     assert inp.route is not None
     metrics = {m: method_metrics(r, inp.route, inp.log) for m, r in runs.items()}
     doc = results_document("log.mcap", "route.geojson", inp.log, runs, metrics)
