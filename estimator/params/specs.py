@@ -82,7 +82,7 @@ def _spec(name: str) -> ParamSpec:
 
 def coerce_value(spec: ParamSpec, value: Any, source: str | None = None) -> Any:
     """Convert and check one value (from TOML, a CLI string or a GUI widget)."""
-    where = source or spec.name
+    where = source
     tp = spec.type
     try:
         if tp is bool:
@@ -90,8 +90,12 @@ def coerce_value(spec: ParamSpec, value: Any, source: str | None = None) -> Any:
                 if value.lower() not in ("true", "false", "1", "0", "yes", "no", "on", "off"):
                     raise ValueError(value)
                 value = value.lower() in ("true", "1", "yes", "on")
+            elif not isinstance(value, bool) and value not in (0, 1):
+                raise ValueError("true or false is required")
             return bool(value)
         if tp is int:
+            if isinstance(value, bool) or (isinstance(value, float) and not value.is_integer()):
+                raise ValueError("a whole number is required")
             out: Any = int(value)
         elif tp is float or tp == (float | None):
             if value is None or (isinstance(value, str) and value.lower() in ("none", "")):
@@ -124,7 +128,7 @@ MAX_MAGNITUDE = 1e9
 """Bound of a number without declared bounds (a tuple's items: a lever arm in metres)."""
 
 
-def _check_number(spec: ParamSpec, value: float, where: str) -> None:
+def _check_number(spec: ParamSpec, value: float, where: str | None) -> None:
     if value != value:
         raise ConfigError(where, f"{spec.name}: NaN is not a valid value (not a finite number)")
     if not math.isfinite(value):

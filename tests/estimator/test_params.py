@@ -91,6 +91,31 @@ def test_bad_bool_is_refused() -> None:
         with_values(Params(), {name: "maybe"})
 
 
+@pytest.mark.parametrize("value", [3, 0.5, [1], {"on": True}, None])
+def test_a_switch_takes_true_or_false_not_whatever_python_calls_truthy(value: object) -> None:
+    """A TOML or JSON ``map_bias = 3`` is a mistake to report, not a switch turned on."""
+    with pytest.raises(ConfigError, match="true or false is required") as caught:
+        with_values(Params(), {"extensions.map_bias": value})
+    assert str(caught.value).count("extensions.map_bias") == 1
+
+
+@pytest.mark.parametrize("value", [1, 0, True, False, "on", "0"])
+def test_a_switch_takes_its_spellings(value: object) -> None:
+    assert with_values(Params(), {"extensions.map_bias": value}).extensions.map_bias is bool(
+        value if not isinstance(value, str) else value in ("on", "1")
+    )
+
+
+@pytest.mark.parametrize("value", [2.5, True])
+def test_a_count_is_not_rounded_from_a_fraction_or_a_switch(value: object) -> None:
+    with pytest.raises(ConfigError, match="a whole number is required"):
+        with_values(Params(), {"gates.min_pairs": value})
+
+
+def test_a_count_takes_a_whole_float() -> None:
+    assert with_values(Params(), {"gates.min_pairs": 4.0}).gates.min_pairs == 4
+
+
 @pytest.mark.parametrize(
     ("text", "problem"),
     [
