@@ -4,6 +4,7 @@ written as CSV, and their cases run as Dask tasks."""
 
 from __future__ import annotations
 
+import argparse
 import csv
 import re
 from collections.abc import Callable, Sequence
@@ -60,3 +61,21 @@ def run_in_workers(
             done.append((order[future.key], future.result()))
             print(f"{label}: {n}/{len(items)}", file=sys.stderr, flush=True)
     return [row for _, row in sorted(done, key=lambda d: d[0])]
+
+
+def check_values(
+    parser: argparse.ArgumentParser, values: dict[str, Any] | None, *, write: bool
+) -> None:
+    """``--values`` (parameter values, JSON) checked before any task runs: every name known,
+    every value of its type, and not with ``--write`` (the docs' figures are the defaults')."""
+    if not values:
+        return
+    if write:
+        parser.error("--values: the docs' figures are of the defaults; leave out --write")
+    from estimator.errors import RoutefuseError
+    from estimator.params import Params, with_values
+
+    try:
+        with_values(Params(), values)
+    except (RoutefuseError, TypeError, ValueError, AttributeError) as exc:
+        parser.error(f"--values: {exc}")

@@ -37,7 +37,7 @@ from typing import Any
 REPO = Path(__file__).resolve().parents[1]
 sys.path.insert(0, str(REPO))
 
-from _doc_blocks import run_in_workers, write_block, write_rows  # noqa: E402
+from _doc_blocks import check_values, run_in_workers, write_block, write_rows  # noqa: E402
 
 COMMA = REPO.parent / "shared" / "data" / "comma2k19"
 COMMA_CONFIG = REPO / "sample_logs" / "configs" / "comma2k19_i280.toml"
@@ -230,6 +230,7 @@ def main(argv: list[str] | None = None) -> int:
         help="give --values to every run (baseline too), as a default would be",
     )
     args = parser.parse_args(argv)
+    check_values(parser, args.values, write=args.write)
     started = time.perf_counter()
     job = (
         functools.partial(run_case, values=args.values, everywhere=args.values_everywhere)

@@ -22,6 +22,7 @@ from __future__ import annotations
 
 import argparse
 import functools
+import json
 import statistics
 import sys
 import time
@@ -31,7 +32,7 @@ from typing import Any
 REPO = Path(__file__).resolve().parents[1]
 sys.path.insert(0, str(REPO))
 
-from _doc_blocks import run_in_workers, write_block, write_rows  # noqa: E402
+from _doc_blocks import check_values, run_in_workers, write_block, write_rows  # noqa: E402
 
 RUNS: dict[str, tuple[str, dict[str, Any], bool]] = {
     "baseline": ("baseline", {}, False),
@@ -44,8 +45,9 @@ map: the control that separates the map's bias from the method, :meth:`Drive.on_
 MARK = "<!-- stress_corpus.py: {} -->"
 
 
-def run_drive(index: int, corpus: int = 0) -> dict[str, Any]:
-    """One corpus drive's row (runs in a Dask worker)."""
+def run_drive(index: int, corpus: int = 0, values: dict[str, Any] | None = None) -> dict[str, Any]:
+    """One corpus drive's row (runs in a Dask worker); ``values`` (``--values``) are given to
+    every run, the baseline's dead reckoning included, as a default would be."""
     import numpy as np
 
     from estimator.evaluation.metrics import NEES_95_2DOF, method_metrics, outage_errors
@@ -74,11 +76,12 @@ def run_drive(index: int, corpus: int = 0) -> dict[str, Any]:
         assert log.truth is not None
         drift = drive.map_error_across()
         row["map_drift_across_rms_m"] = round(float(np.sqrt(np.mean(drift**2))), 2)
-        for label, (method, values, on_the_road) in RUNS.items():
+        for label, (method, run_values, on_the_road) in RUNS.items():
             inputs = drive.on_the_road() if on_the_road else drive.inputs
             route = inputs.route
             assert route is not None
-            run = run_methods(inputs, with_values(Params(), values), methods=(method,))[method]
+            params = with_values(Params(), {**run_values, **(values or {})})
+            run = run_methods(inputs, params, methods=(method,))[method]
             metrics = method_metrics(run, route, log)
             _, nees = outage_errors(run, log, frame)
             t = metrics.truth
@@ -172,11 +175,18 @@ def main(argv: list[str] | None = None) -> int:
     parser.add_argument("--workers", type=int, default=2)
     parser.add_argument("--out", type=Path, default=None, help="folder for stress.csv")
     parser.add_argument("--write", action="store_true", help="write docs/integrity.md's summary")
+    parser.add_argument(
+        "--values",
+        type=json.loads,
+        default=None,
+        help='parameter values given to every run, JSON ({"extensions.x": true}); not with --write',
+    )
     args = parser.parse_args(argv)
+    check_values(parser, args.values, write=args.write)
     if args.corpus < 0:
         parser.error(f"--corpus {args.corpus}: 0 or a held-out corpus 1, 2, ...")
     started = time.perf_counter()
-    task = functools.partial(run_drive, corpus=args.corpus)
+    task = functools.partial(run_drive, corpus=args.corpus, values=args.values)
     rows = run_in_workers(task, range(args.drives), workers=args.workers, label="stress")
     text = summary(rows, args.corpus)
     print(text)
