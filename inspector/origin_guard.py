@@ -1,4 +1,5 @@
-"""Refuse websocket connections from other web pages (cross-site WebSocket hijacking).
+"""Refuse websocket connections from other web pages (cross-site WebSocket hijacking), and keep
+the inspector's page from being framed or pointed at another server.
 
 A browser lets any page the user visits open ``ws://127.0.0.1:PORT``; what protects a local
 server is the ``Origin`` header the browser sends with the handshake, and viser does not look at
@@ -6,10 +7,18 @@ it. Its server is built on the ``websockets`` library, whose ``serve(origins=...
 handshake from any other origin with HTTP 403. viser does not pass that option, so
 :func:`install` wraps ``websockets.asyncio.server.serve`` once per process to add it, computed
 from the address the server actually binds (viser moves to the next port when one is busy).
+The same wrapper checks each handshake's ``Origin`` again against the port the connection
+arrived on, which a server asked for port 0 knows only once bound.
 
 Accepted: ``http://HOST:PORT`` for the bound host, its ``localhost``/``127.0.0.1``/``[::1]``
 twins when it is a loopback address, and every origin named with ``--allow-origin``; and a
 handshake without an ``Origin`` header, which no browser sends (scripts and tests do).
+
+The page viser serves would connect to any server a ``?websocket=`` in its address names, and
+show that server's HTML as its own, in the inspector's origin, where a script can then drive
+the real inspector; so such an address is refused, and every page is sent with a content
+security policy that lets it connect to its own server only and be framed by no page
+(``connect-src 'self'``, ``frame-ancestors 'none'``).
 """
 
 from __future__ import annotations
@@ -20,11 +29,24 @@ import re
 import threading
 from collections.abc import Callable, Iterable
 from typing import Any
-from urllib.parse import urlsplit
+from urllib.parse import parse_qs, urlsplit
 
 import websockets.asyncio.server as ws_server
+from websockets.datastructures import Headers
+from websockets.http11 import Request, Response
 
 LOOPBACK_NAMES = ("127.0.0.1", "localhost", "[::1]")
+DEFAULT_PORTS = {"http": 80, "https": 443}
+REDIRECTING_QUERY = ("websocket", "playbackPath")
+"""viser client query parameters that make the page load another server or file"""
+PAGE_HEADERS = {
+    "Content-Security-Policy": "connect-src 'self' blob: data:; frame-ancestors 'none'",
+    "X-Frame-Options": "DENY",
+    "X-Content-Type-Options": "nosniff",
+    "Referrer-Policy": "no-referrer",
+}
+"""sent with every HTTP response: the page connects to its own server only, and no other
+page may frame it (a click on another site landing on the inspector's buttons)"""
 
 _lock = threading.Lock()
 _extra_origins: frozenset[str] = frozenset()
@@ -32,7 +54,8 @@ _installed = False
 
 
 def normalise_origin(text: str) -> str:
-    """``scheme://host[:port]`` in lower case, as a browser sends it; ValueError otherwise."""
+    """``scheme://host[:port]`` in lower case, the scheme's default port left out, as a browser
+    sends it; ValueError otherwise."""
     parts = urlsplit(text.strip())
     if parts.scheme not in ("http", "https") or not parts.hostname:
         raise ValueError(f"{text!r} is not an origin (expected http://HOST:PORT)")
@@ -41,7 +64,8 @@ def normalise_origin(text: str) -> str:
     host = parts.hostname.lower()
     if ":" in host:
         host = f"[{host}]"
-    port = f":{parts.port}" if parts.port is not None else ""
+    shown_port = parts.port is not None and parts.port != DEFAULT_PORTS[parts.scheme]
+    port = f":{parts.port}" if shown_port else ""
     return f"{parts.scheme}://{host}{port}"
 
 
@@ -76,13 +100,15 @@ def origin_rules(
     return [re.compile(rf"http://(?:{alternatives}):\d+"), *sorted(extra), *rules]
 
 
-def install(extra_origins: Iterable[str] = ()) -> None:
+def install(extra_origins: Iterable[str] | None = None) -> None:
     """Make every websocket server this process starts from now on check ``Origin``.
 
-    Idempotent; the extra origins of the latest call apply (the inspector starts one server)."""
+    Idempotent; the extra origins of the latest call that names any (``None`` keeps them)
+    apply (the inspector starts one server)."""
     global _extra_origins, _installed
     with _lock:
-        _extra_origins = frozenset(normalise_origin(o) for o in extra_origins)
+        if extra_origins is not None:
+            _extra_origins = frozenset(normalise_origin(o) for o in extra_origins)
         if _installed:
             return
         original: Callable[..., Any] = ws_server.serve
@@ -90,8 +116,41 @@ def install(extra_origins: Iterable[str] = ()) -> None:
         @functools.wraps(original)
         def serve(handler: Any, host: Any = None, port: Any = None, **kwargs: Any) -> Any:
             if kwargs.get("origins") is None and isinstance(port, int):
-                kwargs["origins"] = origin_rules(str(host or "127.0.0.1"), port, _extra_origins)
+                bound = str(host or "127.0.0.1")
+                kwargs["origins"] = origin_rules(bound, port, _extra_origins)
+                kwargs["process_request"] = _guarded(kwargs.get("process_request"), bound)
             return original(handler, host, port, **kwargs)
 
         ws_server.serve = serve  # type: ignore[misc,assignment]  # the documented hook is missing in viser
         _installed = True
+
+
+def _refused(status: int, text: str) -> Response:
+    body = text.encode()
+    headers = Headers({"Content-Type": "text/plain; charset=utf-8", **PAGE_HEADERS})
+    headers["Content-Length"] = str(len(body))
+    return Response(status, "Forbidden" if status == 403 else "Bad Request", headers, body)
+
+
+def _guarded(process_request: Callable[..., Any] | None, host: str) -> Callable[..., Any]:
+    """``process_request`` for ``websockets.serve``: a handshake's ``Origin`` checked against the
+    port it arrived on; a page address that would point the client elsewhere refused; every
+    page sent with :data:`PAGE_HEADERS`."""
+
+    def guarded(connection: Any, request: Request) -> Response | None:
+        if request.headers.get("Upgrade", "").lower() == "websocket":
+            origin = request.headers.get("Origin")
+            port = int(connection.local_address[1])
+            if origin is not None and origin not in allowed_origins(host, port, _extra_origins):
+                return _refused(403, "this page's origin may not connect to the inspector")
+            return None
+        query = parse_qs(urlsplit(request.path).query, keep_blank_values=True)
+        if any(name in query for name in REDIRECTING_QUERY):
+            return _refused(400, "the inspector's page connects only to its own server")
+        response = process_request(connection, request) if process_request else None
+        if isinstance(response, Response):
+            for name, value in PAGE_HEADERS.items():
+                response.headers[name] = value
+        return response
+
+    return guarded

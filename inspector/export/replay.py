@@ -306,9 +306,14 @@ def _time_lapse(frames: F64, options: ReplayOptions) -> float:
 
 @contextlib.contextmanager
 def headless_server() -> Iterator[Any]:
-    """A viser server on a free loopback port, its console banner silenced; stopped on exit."""
+    """A viser server on a free loopback port, its console banner silenced; stopped on exit.
+    No browser is meant to connect to it, and none of another origin can
+    (:mod:`inspector.origin_guard`): while it records, it holds the whole replay."""
     import viser
 
+    from inspector import origin_guard
+
+    origin_guard.install()
     try:
         with socket.socket() as s:
             s.bind(("127.0.0.1", 0))

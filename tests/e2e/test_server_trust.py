@@ -121,3 +121,81 @@ def test_a_misbehaving_client_changes_nothing_shared_and_a_new_tab_works(browser
             _wait(lambda: page.locator("input[value='proposed']").count(), 10, "the method")
         finally:
             page.close()
+
+
+@contextlib.contextmanager
+def _foreign_site(html: str):
+    """Another web site on this machine (another port: another origin) serving one page."""
+    from http.server import BaseHTTPRequestHandler, ThreadingHTTPServer
+
+    body = html.encode()
+
+    class Page(BaseHTTPRequestHandler):
+        def do_GET(self) -> None:
+            self.send_response(200)
+            self.send_header("Content-Type", "text/html; charset=utf-8")
+            self.send_header("Content-Length", str(len(body)))
+            self.end_headers()
+            self.wfile.write(body)
+
+        def log_message(self, *args: object) -> None:
+            pass
+
+    site = ThreadingHTTPServer(("127.0.0.1", free_port()), Page)
+    thread = threading.Thread(target=site.serve_forever, daemon=True)
+    thread.start()
+    try:
+        yield f"http://127.0.0.1:{site.server_address[1]}/"
+    finally:
+        site.shutdown()
+        site.server_close()
+
+
+def test_the_page_loads_under_its_policy_and_no_other_site_can_frame_it(browser, inspector):
+    """The inspector's page connects to its own server under ``connect-src 'self'`` (nothing
+    the page needs is refused); another site's page that frames it, to put its buttons under
+    the user's clicks, gets no inspector in the frame and no connection."""
+    server, _controller, app = inspector
+    port = server.get_port()
+    page = browser.new_page(viewport={"width": 1400, "height": 900})
+    refused: list[str] = []
+    page.on("console", lambda m: refused.append(m.text) if "Content Security" in m.text else None)
+    try:
+        page.set_default_timeout(90_000)
+        page.goto(f"http://127.0.0.1:{port}")
+        _wait(lambda: "match attempts" in page.inner_text("body"), 60, "the session")
+        assert refused == []
+    finally:
+        page.close()
+
+    before = {v.client.client_id for v in app.views()}
+    frame_html = f'<p>win a prize</p><iframe src="http://127.0.0.1:{port}/" width=900 height=600>'
+    with _foreign_site(frame_html) as url:
+        page = browser.new_page(viewport={"width": 1400, "height": 900})
+        try:
+            page.goto(url)
+            time.sleep(5.0)
+            assert "win a prize" in page.inner_text("body")
+            framed = [f for f in page.frames if f != page.main_frame]
+            assert framed, "the frame element is there"
+            for f in framed:
+                text = ""
+                with contextlib.suppress(Exception):  # a blocked frame may have no body
+                    text = f.inner_text("body", timeout=2_000)
+                assert "match attempts" not in text
+        finally:
+            page.close()
+    assert {v.client.client_id for v in app.views()} <= before
+
+
+def test_an_address_pointing_the_page_at_another_server_is_refused(browser, inspector):
+    server, _controller, app = inspector
+    before = {v.client.client_id for v in app.views()}
+    page = browser.new_page(viewport={"width": 1400, "height": 900})
+    try:
+        response = page.goto(f"http://127.0.0.1:{server.get_port()}/?websocket=ws://127.0.0.1:9")
+        assert response is not None and response.status == 400
+        assert "connects only to its own server" in page.inner_text("body")
+    finally:
+        page.close()
+    assert {v.client.client_id for v in app.views()} <= before
