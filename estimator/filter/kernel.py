@@ -23,6 +23,7 @@ from estimator.filter.layout import (
     A_INFLATE,
     A_LAST_AID,
     A_NEXT_OUT,
+    A_POS_WALK,
     A_PREV_ACCEL,
     A_PREV_GYRO,
     A_TIME,
@@ -208,6 +209,7 @@ def run_until(
             )
             if used:
                 aux[A_GNSS_USED] = 1.0
+                aux[A_POS_WALK] = 0.0
         idx[I_IMU] = k + 1
         if t >= aux[A_NEXT_OUT]:
             if not finite_state(x, P):

@@ -13,6 +13,7 @@ from estimator.filter.layout import (
     A_COV_F,
     A_COV_T,
     A_COV_W,
+    A_POS_WALK,
     C_ARW2,
     C_QBA,
     C_QBG,
@@ -29,6 +30,7 @@ from estimator.filter.layout import (
     E_GSF,
     E_GW,
     E_LANE,
+    E_POS,
     E_VEL,
     NE,
 )
@@ -132,6 +134,8 @@ def flush_into(P: F64, aux: F64, cfg: F64, A: F64, B: F64, Cb: F64, fn: F64) -> 
             v = P[i, j] + T * (A[i, j] + A[j, i]) + TT * 0.5 * (B[i, j] + B[j, i])
             P[i, j] = v
             P[j, i] = v
+    for i in range(2):
+        P[E_POS + i, E_POS + i] += aux[A_POS_WALK] * T
     for i in range(3):
         P[E_ATT + i, E_ATT + i] += cfg[C_ARW2] * T
         P[E_VEL + i, E_VEL + i] += cfg[C_VRW2] * T

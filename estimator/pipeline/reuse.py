@@ -147,6 +147,7 @@ def filter_key(p: Params) -> Key:
         ext.align_track_accel_ahead,
         ext.cross_track_heading_widen,
         ext.no_wheel_caution,
+        ext.exit_adapt,
         p.output_rate_hz,
     )
 

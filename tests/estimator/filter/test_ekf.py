@@ -53,11 +53,15 @@ def test_euler_quaternion_matches_the_simulator_convention():
         np.testing.assert_allclose(quaternion.dcm_to_euler(C), (r, p, y), atol=1e-12)
 
 
-def test_covariance_propagation_equals_dense_phi_p_phi_t_plus_q():
+@pytest.mark.parametrize("walk", [0.0, 3.5])
+def test_covariance_propagation_equals_dense_phi_p_phi_t_plus_q(walk):
+    """``walk``: the horizontal position's random walk (m^2/s) an outage takes after an exit
+    beyond its sigmas (``extensions.exit_adapt``)."""
     rng = np.random.default_rng(2)
     P = _random_cov(rng)
     cfg = _config(rng)
     aux = np.zeros(layout.NA)
+    aux[layout.A_POS_WALK] = walk
     T = 0.02
     Cb = dcm_from_euler(0.1, -0.05, 2.0)[0]
     fn = np.array([0.3, -0.2, 9.81])
@@ -83,6 +87,7 @@ def test_covariance_propagation_equals_dense_phi_p_phi_t_plus_q():
     q[0:3], q[3:6] = cfg[layout.C_ARW2], cfg[layout.C_VRW2]
     q[9:12], q[12:15] = cfg[layout.C_QBG], cfg[layout.C_QBA]
     q[16:18], q[18] = cfg[layout.C_QW_H], cfg[layout.C_QW_V]
+    q[6:8] = walk
     expected = Phi @ P @ Phi.T + np.diag(q) * T
     got = P.copy()
     propagation.flush_covariance(got, aux, cfg)
