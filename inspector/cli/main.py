@@ -3,16 +3,18 @@
 from __future__ import annotations
 
 import argparse
+import contextlib
 import importlib
 import os
 import sys
 import textwrap
-from collections.abc import Sequence
+from collections.abc import Iterator, Sequence
 from types import ModuleType
-from typing import NoReturn
+from typing import NoReturn, TextIO, cast
 
 from estimator.errors import RoutefuseError
 from inspector.cli.exit_codes import ExitCode, exit_codes_epilog
+from inspector.cli.terminal import PrintableStream, one_line
 
 COMMANDS = (
     "inspector.cli.info",
@@ -106,7 +108,18 @@ def main(argv: Sequence[str] | None = None) -> int:
     """Run one command; its exit code (:class:`ExitCode`; a usage error raises argparse's
     ``SystemExit(2)``)."""
     argv = list(sys.argv[1:] if argv is None else argv)
-    return _execute(build_parser(_command_of(argv)).parse_args(argv))
+    with printable_output():
+        return _execute(build_parser(_command_of(argv)).parse_args(argv))
+
+
+@contextlib.contextmanager
+def printable_output() -> Iterator[None]:
+    """stdout and stderr through :class:`~inspector.cli.terminal.PrintableStream` (argparse's
+    usage errors, which quote what was typed, included)."""
+    out = cast(TextIO, PrintableStream(sys.stdout))
+    err = cast(TextIO, PrintableStream(sys.stderr))
+    with contextlib.redirect_stdout(out), contextlib.redirect_stderr(err):
+        yield
 
 
 def console() -> NoReturn:
@@ -117,8 +130,9 @@ def console() -> NoReturn:
     0.3-0.4 s measured (a 5-minute drive, 2-core machine), longer than the estimation itself,
     and those commands leave nothing for it to do. Every other command exits normally."""
     argv = sys.argv[1:]
-    args = build_parser(_command_of(argv)).parse_args(argv)
-    code = _execute(args)
+    with printable_output():
+        args = build_parser(_command_of(argv)).parse_args(argv)
+        code = _execute(args)
     if args.command in QUICK_EXIT_COMMANDS:
         sys.stdout.flush()
         sys.stderr.flush()
@@ -130,7 +144,7 @@ def _execute(args: argparse.Namespace) -> int:
     try:
         return int(args._execute(args) or 0)
     except RoutefuseError as exc:
-        print(f"routefuse: error: {exc}", file=sys.stderr)
+        print(f"routefuse: error: {one_line(str(exc))}", file=sys.stderr)
         return ExitCode.REFUSED
     except KeyboardInterrupt:
         print("routefuse: interrupted", file=sys.stderr)
@@ -139,7 +153,7 @@ def _execute(args: argparse.Namespace) -> int:
         if args.debug or os.environ.get("ROUTEFUSE_DEBUG"):
             raise
         print(
-            f"routefuse: internal error: {type(exc).__name__}: {exc} "
+            f"routefuse: internal error: {type(exc).__name__}: {one_line(str(exc))} "
             "(run with --debug for the traceback)",
             file=sys.stderr,
         )

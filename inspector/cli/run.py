@@ -24,6 +24,7 @@ from inspector.cli.options import (
     params_from_args,
     parse_outage,
 )
+from inspector.cli.terminal import one_line
 
 if TYPE_CHECKING:
     from estimator.results import Run
@@ -242,7 +243,7 @@ def _print_notes(runs: dict[str, Run], summaries: dict[str, dict[str, Any]]) -> 
         for note in run_notes(r):
             print(f"{method}: {note}")
     for warning in dict.fromkeys(w for r in runs.values() for w in r.warnings):
-        print(f"routefuse run: warning: {warning}", file=sys.stderr)
+        print(f"routefuse run: warning: {one_line(warning)}", file=sys.stderr)
 
 
 def _write_csv(path: Path, runs: Iterable[Run]) -> None:

@@ -31,6 +31,7 @@ from inspector.cli.samples import (
     find_sample_logs,
     sample_log_candidates,
 )
+from inspector.cli.terminal import one_line
 
 if TYPE_CHECKING:
     import viser
@@ -376,12 +377,16 @@ def execute(args: argparse.Namespace) -> int:
         controller.subscribe(
             on_progress=TerminalProgress(),
             on_session=loaded,
-            on_error=lambda exc: print(f"routefuse: error: {exc}", file=sys.stderr, flush=True),
+            on_error=lambda exc: print(
+                f"routefuse: error: {one_line(str(exc))}", file=sys.stderr, flush=True
+            ),
         )
         # after subscribing: an early failure prints
         open_first(controller, log, route, outages, route_feature=route_feature)
         for warning in controller.folders.listing().warnings:
-            print(f"routefuse serve: warning: {warning[:300]}", file=sys.stderr, flush=True)
+            print(
+                f"routefuse serve: warning: {one_line(warning[:300])}", file=sys.stderr, flush=True
+            )
         while True:
             time.sleep(0.5)
     except KeyboardInterrupt:
