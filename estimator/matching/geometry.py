@@ -8,6 +8,7 @@ compute what :class:`~estimator.route.Route`'s numpy methods do, bit for bit.
 
 from __future__ import annotations
 
+import math
 from typing import Literal, NamedTuple
 
 import numpy as np
@@ -183,18 +184,53 @@ def track_on_route(
     return s, lat
 
 
+SAME_PLACE_M = 5.0
+"""stretches of a route this much farther from a position than the nearest are as near: an
+out-and-back route draws the road twice, once each way, on the same line"""
+
+
 def route_arc_length(
-    route: Route, xy: ArrayLike, *, s_guess: float | None = None, params: Params
+    route: Route,
+    xy: ArrayLike,
+    *,
+    s_guess: float | None = None,
+    params: Params,
+    heading_xy: ArrayLike | None = None,
 ) -> float:
     """Route arc length of a position, searched within ``window.route_search_m`` of ``s_guess``
-    (globally when None), so the pipeline can track where on the route the vehicle is."""
+    (globally when None), so the pipeline can track where on the route the vehicle is.
+    Searched globally with the vehicle's horizontal velocity ``heading_xy``, where the nearest
+    stretch is drawn against the vehicle's travel, of the stretches as near as it
+    (:data:`SAME_PLACE_M`) the one drawn most nearly the way the vehicle drives: on a route
+    that comes back along the road it went out on, the nearest point alone may be on the leg
+    drawn the other way, where every match is then refused for its heading."""
     p = np.asarray(xy, np.float64).reshape(-1)[:2]
     if not np.all(np.isfinite(p)):
         raise RoutefuseError(None, "route match: position to project is not finite")
     if s_guess is None:
-        return float(project_on_route(route, p)[0][0])
+        s_near = float(project_on_route(route, p)[0][0])
+        if heading_xy is None:
+            return s_near
+        return _along_the_heading(route, p, np.asarray(heading_xy, np.float64)[:2], s_near)
     road = Polyline.of(route)
     return float(project_near(road, p, s_guess, params.window.route_search_m)[0][0])
+
+
+def _along_the_heading(route: Route, p: F64, heading: F64, s_near: float) -> float:
+    speed = float(np.hypot(*heading))
+    if not (math.isfinite(speed) and speed > 0.0) or len(route.seglen) == 0:
+        return s_near
+    if float(route.tangent_at(np.array([s_near]))[0] @ heading) > 0.0:
+        return s_near  # drawn the way the vehicle drives: the nearest point is the place
+    along = np.clip(np.einsum("ij,ij->i", p - route.xy[:-1], route.unit), 0.0, route.seglen)
+    foot = route.xy[:-1] + along[:, None] * route.unit
+    distance = np.hypot(*(p - foot).T)
+    near = distance <= float(distance.min()) + SAME_PLACE_M
+    agreement = np.where(near, route.unit @ (heading / speed), -np.inf)
+    k = int(np.argmax(agreement))
+    if agreement[k] <= 0.0:
+        return s_near
+    return float(route.s[k] + along[k])
 
 
 def learn_lane_offset(

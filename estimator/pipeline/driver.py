@@ -791,7 +791,13 @@ class Driver:
         """Place the vehicle on the route and learn the lane offset at an interval's start."""
         rows = out[:n_out]
         tr = self.track
-        tr.s = route_arc_length(self.route, x[:2], s_guess=self._predicted_s(aux), params=self.p)
+        tr.s = route_arc_length(
+            self.route,
+            x[:2],
+            s_guess=self._predicted_s(aux),
+            params=self.p,
+            heading_xy=x[X_VEL : X_VEL + 2],
+        )
         tr.s_dist = float(aux[A_DIST])
         used = rows[:, O_GNSS] > 0
         # the offset is learned around the last epoch a fix was used in, which may lie well
