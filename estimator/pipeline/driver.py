@@ -20,6 +20,7 @@ from __future__ import annotations
 
 import dataclasses
 import math
+from collections import Counter
 from collections.abc import Callable, Sequence
 from dataclasses import dataclass
 from typing import Literal
@@ -211,6 +212,7 @@ def run(
         + (route.warnings if route is not None else ())
         + gnss_acceptance_warnings(log, epochs, inputs.degraded)
         + separation_warnings(driver.records, log.t_start, p)
+        + refused_outage_warnings(method, driver.records, inputs.degraded, log.t_start)
         + reacquire_warnings(driver.records, log.t_start)
         + gap_bridge_warnings(driver.records, log.t_start)
         + approach_warnings(driver.checkpoints, driver.inp.degraded, log.t_start, p)
@@ -285,6 +287,40 @@ def separation_warnings(
             "outage is dead-reckoned: the route there is off the road, or the filter trusted it "
             "too much"
         )
+    return tuple(lines)
+
+
+REFUSED_OUTAGE_MIN_ATTEMPTS = 5
+"""an outage with this many match attempts, every one refused, is named in a warning"""
+REFUSED_OUTAGES_NAMED = 4
+
+
+def refused_outage_warnings(
+    method: str,
+    records: Sequence[MatchRecord],
+    degraded: Sequence[tuple[float, float]],
+    t_start: float,
+) -> tuple[str, ...]:
+    """One line per outage whose match attempts were all refused: the method ran as dead
+    reckoning there, which its figures alone would not tell apart from a route that helped
+    nothing. The gates that refused them say why: a route drawn against the travel
+    (heading), another road (lane continuity, rivals), a route far from the vehicle."""
+    lines = []
+    for a, b in degraded:
+        tried = [r for r in records if a <= r.t <= b]
+        if len(tried) < REFUSED_OUTAGE_MIN_ATTEMPTS or any(r.accepted for r in tried):
+            continue
+        gates = Counter(r.failed_gates[0].name if r.failed_gates else "other" for r in tried)
+        lines.append(
+            f"{method} run: all {len(tried)} match attempts in the outage at "
+            f"{a - t_start:.1f}-{b - t_start:.1f} s were refused "
+            f"({', '.join(f'{g} {n}' for g, n in gates.most_common())}): it was dead-reckoned "
+            "there; check that the route is the road driven, drawn the way it was driven"
+        )
+    if len(lines) > REFUSED_OUTAGES_NAMED + 1:
+        more = len(lines) - REFUSED_OUTAGES_NAMED
+        summary = f"{method} run: ... and {more} more outages whose match attempts were all refused"
+        lines = [*lines[:REFUSED_OUTAGES_NAMED], summary]
     return tuple(lines)
 
 
