@@ -52,6 +52,12 @@ WHEEL_RATIO_OK = (0.8, 1.25)
 MIN_WHEEL_PAIRS = 20
 VARIANCE_CEILING_M2 = 1e6
 VARIANCE_FLOOR_M2 = 1e-6
+FAR_FIX_M = 100_000.0
+FAR_FIX_SPREADS = 4.0
+"""A valid fix farther than both this and this many times the fixes' median distance from
+their median position is not where the vehicle was (a receiver's cold-start 0, 0, a corrupt
+message): at its straight drive's ends a log's fixes are twice their median distance away."""
+EARTH_RADIUS_M = 6_371_000.0
 
 
 @dataclasses.dataclass(frozen=True)
@@ -81,6 +87,7 @@ def checked(path: Path, log: Log) -> Log:
     warnings: list[str] = []
     _imu_alive(path, log, warnings)
     _gravity(path, log, warnings)
+    log = dataclasses.replace(log, gnss=_far_fixes(path, log, warnings))
     gnss = _variances(log, warnings)
     log = dataclasses.replace(log, gnss=gnss)
     motion = _gnss_motion(log)
@@ -91,6 +98,57 @@ def checked(path: Path, log: Log) -> Log:
     if not warnings:
         return log
     return dataclasses.replace(log, warnings=(*log.warnings, *warnings))
+
+
+def in_bulk(lat: F64, lon: F64) -> NDArray[np.bool_]:
+    """Which of the positions (degrees, finite) agree with the bulk of them: within
+    :data:`FAR_FIX_M` (or :data:`FAR_FIX_SPREADS` times their median distance) of their
+    median. The session frame is placed at the first of them and the rest are left out
+    (:func:`_far_fixes`); a first fix at 0, 0 would put the frame, and every route and fix
+    in it, thousands of km off."""
+    everyone = np.ones(len(lat), bool)
+    if len(lat) < 3:
+        return everyone
+    d = _from_median_m(lat, lon)
+    bulk: NDArray[np.bool_] = d <= max(FAR_FIX_M, FAR_FIX_SPREADS * float(np.median(d)))
+    return bulk if 2 * np.count_nonzero(bulk) > len(lat) else everyone
+
+
+def _from_median_m(lat: F64, lon: F64) -> F64:
+    """Great-circle distance of each position from their median latitude and longitude."""
+    phi, lam = np.radians(lat), np.radians(lon)
+    phi0, lam0 = float(np.median(phi)), float(np.median(lam))
+    h = np.sin((phi - phi0) / 2) ** 2 + np.cos(phi) * np.cos(phi0) * np.sin((lam - lam0) / 2) ** 2
+    d: F64 = 2 * EARTH_RADIUS_M * np.arcsin(np.sqrt(np.clip(h, 0.0, 1.0)))
+    return d
+
+
+def topic_of(log: Log, role: str) -> str:
+    """The topic the log's ``role`` stream (``'imu'``, ``'gnss'``, ``'wheel'``) was read from."""
+    return next((t.topic for t in log.topics if t.role == role), role)
+
+
+def _far_fixes(path: Path, log: Log, warnings: list[str]) -> GnssData:
+    """The fixes with those far from the bulk of the log's (:func:`in_bulk`) made no fix,
+    named in one line."""
+    g = log.gnss
+    ok = np.flatnonzero(g.valid)
+    far = ~in_bulk(g.lat[ok], g.lon[ok])
+    if not far.any():
+        return g
+    km = _from_median_m(g.lat[ok], g.lon[ok])[far] / 1000.0
+    n = int(far.sum())
+    t = g.t[ok[far]] - log.t_start
+    at = f"{t[0]:.1f} s" if n == 1 else f"{t.min():.1f}-{t.max():.1f} s"
+    away = f"{km[0]:.0f} km" if n == 1 else f"{km.min():.0f}-{km.max():.0f} km"
+    warnings.append(
+        f"{path.name}: GNSS {topic_of(log, 'gnss')}: {n} fix{'es' if n > 1 else ''} at {at}, "
+        f"{away} from the bulk of the log's fixes, left out of the run (a receiver's "
+        "cold-start position such as 0, 0, or corrupt messages)"
+    )
+    status = g.status.copy()
+    status[ok[far]] = -1
+    return dataclasses.replace(g, status=status)
 
 
 def _span(log: Log, t: F64) -> str:

@@ -87,7 +87,7 @@ from estimator.filter.updates import (
     pseudo_position_update,
     turn_map_bias,
 )
-from estimator.io.plausibility import GRAVITY
+from estimator.io.plausibility import GRAVITY, in_bulk
 from estimator.log import Log
 from estimator.matching import (
     MatchGeometry,
@@ -506,10 +506,13 @@ def aided_approach_m(rows: F64, t_a: float, degraded: Sequence[tuple[float, floa
 
 
 def _frame_of(log: Log) -> LocalFrame:
-    ok = log.gnss.valid
-    if not ok.any():
+    """At the first valid fix that agrees with the bulk of them (:func:`in_bulk`)."""
+    g = log.gnss
+    ok = np.flatnonzero(g.valid)
+    if not len(ok):
         raise LogError(log.path, "no valid GNSS fix: the filter cannot be initialised")
-    return LocalFrame.at(log.gnss.lat[ok], log.gnss.lon[ok], log.gnss.alt[ok])
+    ok = ok[in_bulk(g.lat[ok], g.lon[ok])]
+    return LocalFrame.at(g.lat[ok], g.lon[ok], g.alt[ok])
 
 
 @dataclass
