@@ -58,6 +58,12 @@ FAR_FIX_SPREADS = 4.0
 their median position is not where the vehicle was (a receiver's cold-start 0, 0, a corrupt
 message): at its straight drive's ends a log's fixes are twice their median distance away."""
 EARTH_RADIUS_M = 6_371_000.0
+OTHER_CLOCK_S = 60.0
+"""GNSS or wheel samples stamped further than this outside the IMU's span are on another clock
+(or their stream's clock stepped): the filter runs over the IMU's span, so they go unused."""
+MIN_IMU_INTERVAL_S = 1e-4
+"""A median IMU interval below this (over 10 kHz; vehicle IMUs run at up to a few hundred
+Hz) is stamps on another time scale: a 75 s drive squeezed into milliseconds."""
 
 
 @dataclasses.dataclass(frozen=True)
@@ -85,6 +91,8 @@ def checked(path: Path, log: Log) -> Log:
     left out, fixes with a kilometre of variance made no fixes); refused when no estimate can
     be meaningful."""
     warnings: list[str] = []
+    _imu_rate(path, log)
+    log = _on_the_imu_clock(path, log, warnings)
     _imu_alive(path, log, warnings)
     _gravity(path, log, warnings)
     log = dataclasses.replace(log, gnss=_far_fixes(path, log, warnings))
@@ -149,6 +157,76 @@ def _far_fixes(path: Path, log: Log, warnings: list[str]) -> GnssData:
     status = g.status.copy()
     status[ok[far]] = -1
     return dataclasses.replace(g, status=status)
+
+
+def _imu_rate(path: Path, log: Log) -> None:
+    """Refuse IMU stamps on another time scale than the other streams' seconds: the drive
+    would be integrated over milliseconds, with no fix inside it."""
+    t = log.imu.t
+    step = float(np.median(np.diff(t)))
+    if step >= MIN_IMU_INTERVAL_S:
+        return
+    g = log.gnss.t
+    raise LogError(
+        path,
+        f"IMU {topic_of(log, 'imu')}: its {len(t)} samples are stamped within "
+        f"{float(t[-1] - t[0]) * 1e3:.3g} ms (a median interval of {step * 1e6:.3g} us), while "
+        f"GNSS spans {float(g[-1] - g[0]):.1f} s: its stamps are not in seconds, or its clock "
+        "runs at another rate; no estimate can be made",
+    )
+
+
+def _on_the_imu_clock(path: Path, log: Log, warnings: list[str]) -> Log:
+    """GNSS and wheel samples stamped more than :data:`OTHER_CLOCK_S` outside the IMU's span
+    named in one line a stream: fixes after a step of the GNSS clock are left out; a wheel
+    stream wholly outside goes unused (:func:`estimator.filter.setup.prepare_inputs` runs
+    without a wheel stream that does not overlap the IMU). Without this the run went on in
+    silence: GNSS stamped two days late mid-log showed as a 48-hour outage, a wheel stream
+    an hour late was an IMU-and-GNSS run with the parameters of one with wheels."""
+    g = log.gnss
+    out = off_the_imu_clock(log.imu.t, g.t)
+    if out.any() and not out.all():
+        warnings.append(_off_clock(path, log, "GNSS", g.t, out, "left out of the run"))
+        keep = ~out
+        log = dataclasses.replace(
+            log,
+            gnss=GnssData(
+                g.t[keep], g.lat[keep], g.lon[keep], g.alt[keep], g.status[keep], g.cov_enu[keep]
+            ),
+        )
+    w = log.wheel
+    if w is not None and len(w.t):
+        out = off_the_imu_clock(log.imu.t, w.t)
+        if out.all():
+            warnings.append(_off_clock(path, log, "wheel", w.t, out, "IMU and GNSS only"))
+        elif out.any():
+            warnings.append(_off_clock(path, log, "wheel", w.t, out, "unused"))
+    return log
+
+
+def off_the_imu_clock(imu_t: F64, t: F64) -> NDArray[np.bool_]:
+    """Which of the stamps ``t`` lie more than :data:`OTHER_CLOCK_S` outside the IMU's span."""
+    out: NDArray[np.bool_] = (t < imu_t[0] - OTHER_CLOCK_S) | (t > imu_t[-1] + OTHER_CLOCK_S)
+    return out
+
+
+def _off_clock(path: Path, log: Log, role: str, t: F64, out: NDArray[np.bool_], what: str) -> str:
+    """One line naming the samples of ``role`` stamped outside the IMU's span, and a step of
+    the stream's clock that put them there."""
+    rel = t - log.t_start
+    k = int(np.argmax(out))
+    step = ""
+    if k > 0 and rel[k] - rel[k - 1] > OTHER_CLOCK_S:
+        step = f"its clock steps {rel[k] - rel[k - 1]:.1f} s forward after {rel[k - 1]:.1f} s; "
+    n = int(out.sum())
+    many = f"all {n}" if n == len(t) else f"{n} of its {len(t)}"
+    unit = {"GNSS": "fixes", "wheel": "samples"}[role]
+    stamped = f"{float(rel[out].min()):.1f}-{float(rel[out].max()):.1f} s"
+    return (
+        f"{path.name}: {role} {topic_of(log, role.lower())}: {step}{many} {unit} are stamped "
+        f"{stamped}, more than {OTHER_CLOCK_S:g} s outside the IMU's 0.0-"
+        f"{log.t_end - log.t_start:.1f} s (another clock, or a step of it): {what}"
+    )
 
 
 def _span(log: Log, t: F64) -> str:
