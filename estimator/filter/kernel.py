@@ -82,6 +82,9 @@ GAP_TILT_VAR = math.radians(3.0) ** 2
 """Roll and pitch variance added across a logging gap: the road's grade and bank change (3 deg
 is a 5 % grade). Held at the sigma before the gap, a grade the gap hides leaks gravity into the
 forward acceleration (0.17 m/s^2 a degree), which the wheel-speed row then reads as heading."""
+OUTPUT_STEPS_WALKED = 1_000_000
+"""Output intervals the next output time is stepped through one by one (14 h at 20 Hz); a
+longer gap is crossed in one step (:func:`_next_output_after`)."""
 ZUPT_MAX_SPEED = 1.0
 """m/s: a stop is only believed when the filter has slowed down to it (a vehicle cruising on a
 smooth road at constant speed looks as still to the IMU as a parked one)."""
@@ -215,9 +218,23 @@ def run_until(
             if not finite_state(x, P):
                 return STATUS_DIVERGED
             write_row(x, P, aux, idx, out)
-            while aux[A_NEXT_OUT] <= t:
-                aux[A_NEXT_OUT] += cfg[C_OUT_DT]
+            _next_output_after(aux, t, cfg[C_OUT_DT])
     return STATUS_DONE
+
+
+@kernel
+def _next_output_after(aux: F64, t: float, out_dt: float) -> None:
+    """Move the next output time past ``t`` on the output grid. Across a gap of more than
+    :data:`OUTPUT_STEPS_WALKED` intervals (a clock that jumped days or years forward) the grid
+    is crossed in one step: walked, it would take a loop iteration per output interval."""
+    behind = t - aux[A_NEXT_OUT]
+    if behind > OUTPUT_STEPS_WALKED * out_dt:
+        aux[A_NEXT_OUT] += (math.floor(behind / out_dt) + 1.0) * out_dt
+        if aux[A_NEXT_OUT] <= t:  # an interval below the stamps' resolution there
+            aux[A_NEXT_OUT] = t + out_dt
+        return
+    while aux[A_NEXT_OUT] <= t:
+        aux[A_NEXT_OUT] += out_dt
 
 
 @kernel

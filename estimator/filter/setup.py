@@ -62,6 +62,7 @@ from estimator.filter.layout import (
     NI,
 )
 from estimator.filter.moving_mean import moving_mean
+from estimator.io.plausibility import off_the_imu_clock
 from estimator.log import Log
 from estimator.nav.earth import earth_rate_n, normal_gravity
 from estimator.nav.frames import LocalFrame
@@ -386,15 +387,30 @@ def _imu_arrays(log: Log, s: SensorParams, warnings: list[str]) -> tuple[F64, F6
 
 
 def _wheel_arrays(log: Log, s: SensorParams, warnings: list[str]) -> tuple[F64, F64]:
-    """Wheel speed on the IMU clock, finite and sorted; empty when there are fewer than two."""
+    """Wheel speed on the IMU clock, finite and sorted; empty when there are fewer than two, or
+    when none falls in the IMU's span (a stream on another clock: the run is then one without
+    wheels, with those parameters, not one that waits for wheel samples that never come)."""
     wheel_t = np.empty(0)
     wheel_v = np.empty(0)
+    logged_t = np.empty(0)
     if log.wheel is not None and len(log.wheel.t):
-        wt = np.asarray(log.wheel.t, np.float64) + s.wheel_time_offset_s
+        logged_t = np.asarray(log.wheel.t, np.float64)
+        wt = logged_t + s.wheel_time_offset_s
         wv = np.asarray(log.wheel.speed, np.float64)
         good = np.isfinite(wt) & np.isfinite(wv)
         order = np.argsort(wt[good], kind="stable")
         wheel_t, wheel_v = wt[good][order], wv[good][order]
+    imu_t = log.imu.t
+    if len(wheel_t) and (wheel_t[0] > imu_t[-1] or wheel_t[-1] < imu_t[0]):
+        # named by the loader (plausibility) when that far off as logged
+        if not off_the_imu_clock(imu_t, logged_t).all():
+            warnings.append(
+                f"wheel speed stamped {wheel_t[0] - log.t_start:.1f}-"
+                f"{wheel_t[-1] - log.t_start:.1f} s (with sensors.wheel_time_offset_s = "
+                f"{s.wheel_time_offset_s:g}) does not overlap the IMU's 0.0-"
+                f"{log.t_end - log.t_start:.1f} s: IMU and GNSS only"
+            )
+        return np.empty(0), np.empty(0)
     if len(wheel_t) < 2:
         warnings.append("no wheel speed: IMU + GNSS with non-holonomic constraints")
         wheel_t, wheel_v = np.empty(0), np.empty(0)

@@ -19,8 +19,9 @@ import numpy as np
 from estimator.io.topics import TopicChoice
 from estimator.log import GnssData, ImuData, Log, TopicInfo, TruthData, WheelData
 
-CACHE_VERSION = 6
-"""5: logs whose IMU and GNSS share no time are refused (they were cached as decoded)"""
+CACHE_VERSION = 8
+"""5: logs whose IMU and GNSS share no time are refused (they were cached as decoded); 8: fixes
+far from the bulk of a log's are left out, streams on another clock than the IMU's named"""
 CACHE_MAX_BYTES = 2_000_000_000
 """Least recently used cache entries are removed beyond this total size."""
 

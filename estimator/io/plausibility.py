@@ -52,6 +52,18 @@ WHEEL_RATIO_OK = (0.8, 1.25)
 MIN_WHEEL_PAIRS = 20
 VARIANCE_CEILING_M2 = 1e6
 VARIANCE_FLOOR_M2 = 1e-6
+FAR_FIX_M = 100_000.0
+FAR_FIX_SPREADS = 4.0
+"""A valid fix farther than both this and this many times the fixes' median distance from
+their median position is not where the vehicle was (a receiver's cold-start 0, 0, a corrupt
+message): at its straight drive's ends a log's fixes are twice their median distance away."""
+EARTH_RADIUS_M = 6_371_000.0
+OTHER_CLOCK_S = 60.0
+"""GNSS or wheel samples stamped further than this outside the IMU's span are on another clock
+(or their stream's clock stepped): the filter runs over the IMU's span, so they go unused."""
+MIN_IMU_INTERVAL_S = 1e-4
+"""A median IMU interval below this (over 10 kHz; vehicle IMUs run at up to a few hundred
+Hz) is stamps on another time scale: a 75 s drive squeezed into milliseconds."""
 
 
 @dataclasses.dataclass(frozen=True)
@@ -79,8 +91,11 @@ def checked(path: Path, log: Log) -> Log:
     left out, fixes with a kilometre of variance made no fixes); refused when no estimate can
     be meaningful."""
     warnings: list[str] = []
+    _imu_rate(path, log)
+    log = _on_the_imu_clock(path, log, warnings)
     _imu_alive(path, log, warnings)
     _gravity(path, log, warnings)
+    log = dataclasses.replace(log, gnss=_far_fixes(path, log, warnings))
     gnss = _variances(log, warnings)
     log = dataclasses.replace(log, gnss=gnss)
     motion = _gnss_motion(log)
@@ -91,6 +106,127 @@ def checked(path: Path, log: Log) -> Log:
     if not warnings:
         return log
     return dataclasses.replace(log, warnings=(*log.warnings, *warnings))
+
+
+def in_bulk(lat: F64, lon: F64) -> NDArray[np.bool_]:
+    """Which of the positions (degrees, finite) agree with the bulk of them: within
+    :data:`FAR_FIX_M` (or :data:`FAR_FIX_SPREADS` times their median distance) of their
+    median. The session frame is placed at the first of them and the rest are left out
+    (:func:`_far_fixes`); a first fix at 0, 0 would put the frame, and every route and fix
+    in it, thousands of km off."""
+    everyone = np.ones(len(lat), bool)
+    if len(lat) < 3:
+        return everyone
+    d = _from_median_m(lat, lon)
+    bulk: NDArray[np.bool_] = d <= max(FAR_FIX_M, FAR_FIX_SPREADS * float(np.median(d)))
+    return bulk if 2 * np.count_nonzero(bulk) > len(lat) else everyone
+
+
+def _from_median_m(lat: F64, lon: F64) -> F64:
+    """Great-circle distance of each position from their median latitude and longitude."""
+    phi, lam = np.radians(lat), np.radians(lon)
+    phi0, lam0 = float(np.median(phi)), float(np.median(lam))
+    h = np.sin((phi - phi0) / 2) ** 2 + np.cos(phi) * np.cos(phi0) * np.sin((lam - lam0) / 2) ** 2
+    d: F64 = 2 * EARTH_RADIUS_M * np.arcsin(np.sqrt(np.clip(h, 0.0, 1.0)))
+    return d
+
+
+def topic_of(log: Log, role: str) -> str:
+    """The topic the log's ``role`` stream (``'imu'``, ``'gnss'``, ``'wheel'``) was read from."""
+    return next((t.topic for t in log.topics if t.role == role), role)
+
+
+def _far_fixes(path: Path, log: Log, warnings: list[str]) -> GnssData:
+    """The fixes with those far from the bulk of the log's (:func:`in_bulk`) made no fix,
+    named in one line."""
+    g = log.gnss
+    ok = np.flatnonzero(g.valid)
+    far = ~in_bulk(g.lat[ok], g.lon[ok])
+    if not far.any():
+        return g
+    km = _from_median_m(g.lat[ok], g.lon[ok])[far] / 1000.0
+    n = int(far.sum())
+    t = g.t[ok[far]] - log.t_start
+    at = f"{t[0]:.1f} s" if n == 1 else f"{t.min():.1f}-{t.max():.1f} s"
+    away = f"{km[0]:.0f} km" if n == 1 else f"{km.min():.0f}-{km.max():.0f} km"
+    warnings.append(
+        f"{path.name}: GNSS {topic_of(log, 'gnss')}: {n} fix{'es' if n > 1 else ''} at {at}, "
+        f"{away} from the bulk of the log's fixes, left out of the run (a receiver's "
+        "cold-start position such as 0, 0, or corrupt messages)"
+    )
+    status = g.status.copy()
+    status[ok[far]] = -1
+    return dataclasses.replace(g, status=status)
+
+
+def _imu_rate(path: Path, log: Log) -> None:
+    """Refuse IMU stamps on another time scale than the other streams' seconds: the drive
+    would be integrated over milliseconds, with no fix inside it."""
+    t = log.imu.t
+    step = float(np.median(np.diff(t)))
+    if step >= MIN_IMU_INTERVAL_S:
+        return
+    g = log.gnss.t
+    raise LogError(
+        path,
+        f"IMU {topic_of(log, 'imu')}: its {len(t)} samples are stamped within "
+        f"{float(t[-1] - t[0]) * 1e3:.3g} ms (a median interval of {step * 1e6:.3g} us), while "
+        f"GNSS spans {float(g[-1] - g[0]):.1f} s: its stamps are not in seconds, or its clock "
+        "runs at another rate; no estimate can be made",
+    )
+
+
+def _on_the_imu_clock(path: Path, log: Log, warnings: list[str]) -> Log:
+    """GNSS and wheel samples stamped more than :data:`OTHER_CLOCK_S` outside the IMU's span
+    named in one line a stream: fixes after a step of the GNSS clock are left out; a wheel
+    stream wholly outside goes unused (:func:`estimator.filter.setup.prepare_inputs` runs
+    without a wheel stream that does not overlap the IMU). Without this the run went on in
+    silence: GNSS stamped two days late mid-log showed as a 48-hour outage, a wheel stream
+    an hour late was an IMU-and-GNSS run with the parameters of one with wheels."""
+    g = log.gnss
+    out = off_the_imu_clock(log.imu.t, g.t)
+    if out.any() and not out.all():
+        warnings.append(_off_clock(path, log, "GNSS", g.t, out, "left out of the run"))
+        keep = ~out
+        log = dataclasses.replace(
+            log,
+            gnss=GnssData(
+                g.t[keep], g.lat[keep], g.lon[keep], g.alt[keep], g.status[keep], g.cov_enu[keep]
+            ),
+        )
+    w = log.wheel
+    if w is not None and len(w.t):
+        out = off_the_imu_clock(log.imu.t, w.t)
+        if out.all():
+            warnings.append(_off_clock(path, log, "wheel", w.t, out, "IMU and GNSS only"))
+        elif out.any():
+            warnings.append(_off_clock(path, log, "wheel", w.t, out, "unused"))
+    return log
+
+
+def off_the_imu_clock(imu_t: F64, t: F64) -> NDArray[np.bool_]:
+    """Which of the stamps ``t`` lie more than :data:`OTHER_CLOCK_S` outside the IMU's span."""
+    out: NDArray[np.bool_] = (t < imu_t[0] - OTHER_CLOCK_S) | (t > imu_t[-1] + OTHER_CLOCK_S)
+    return out
+
+
+def _off_clock(path: Path, log: Log, role: str, t: F64, out: NDArray[np.bool_], what: str) -> str:
+    """One line naming the samples of ``role`` stamped outside the IMU's span, and a step of
+    the stream's clock that put them there."""
+    rel = t - log.t_start
+    k = int(np.argmax(out))
+    step = ""
+    if k > 0 and rel[k] - rel[k - 1] > OTHER_CLOCK_S:
+        step = f"its clock steps {rel[k] - rel[k - 1]:.1f} s forward after {rel[k - 1]:.1f} s; "
+    n = int(out.sum())
+    many = f"all {n}" if n == len(t) else f"{n} of its {len(t)}"
+    unit = {"GNSS": "fixes", "wheel": "samples"}[role]
+    stamped = f"{float(rel[out].min()):.1f}-{float(rel[out].max()):.1f} s"
+    return (
+        f"{path.name}: {role} {topic_of(log, role.lower())}: {step}{many} {unit} are stamped "
+        f"{stamped}, more than {OTHER_CLOCK_S:g} s outside the IMU's 0.0-"
+        f"{log.t_end - log.t_start:.1f} s (another clock, or a step of it): {what}"
+    )
 
 
 def _span(log: Log, t: F64) -> str:

@@ -88,7 +88,7 @@ from estimator.filter.updates import (
     pseudo_position_update,
     turn_map_bias,
 )
-from estimator.io.plausibility import GRAVITY
+from estimator.io.plausibility import GRAVITY, in_bulk
 from estimator.log import Log
 from estimator.matching import (
     MatchGeometry,
@@ -542,10 +542,13 @@ def aided_approach_m(rows: F64, t_a: float, degraded: Sequence[tuple[float, floa
 
 
 def _frame_of(log: Log) -> LocalFrame:
-    ok = log.gnss.valid
-    if not ok.any():
+    """At the first valid fix that agrees with the bulk of them (:func:`in_bulk`)."""
+    g = log.gnss
+    ok = np.flatnonzero(g.valid)
+    if not len(ok):
         raise LogError(log.path, "no valid GNSS fix: the filter cannot be initialised")
-    return LocalFrame.at(log.gnss.lat[ok], log.gnss.lon[ok], log.gnss.alt[ok])
+    ok = ok[in_bulk(g.lat[ok], g.lon[ok])]
+    return LocalFrame.at(g.lat[ok], g.lon[ok], g.alt[ok])
 
 
 @dataclass
@@ -620,12 +623,21 @@ class Driver:
         self.loop(0, None)
 
     def _rows_needed(self) -> int:
+        """Room for the output rows the run will most likely write: one per output interval,
+        but no more than the IMU samples (the kernel writes a row only as a sample arrives),
+        and one per match attempt, no more than the distance the outage's IMU samples can
+        travel allows. Counted from the data, not the span: a clock that jumps years forward
+        would otherwise ask for rows for every output interval of those years. A run that
+        writes more grows the buffer (:meth:`Filter.grow`)."""
         inp = self.inp
-        span = float(inp.imu_t[-1] - inp.imu_t[inp.idx0[I_IMU] - 1])
-        n = int(span * self.p.output_rate_hz) + 16
+        k0 = int(inp.idx0[I_IMU]) - 1
+        span = float(inp.imu_t[-1] - inp.imu_t[k0])
+        n = min(int(span * self.p.output_rate_hz), len(inp.imu_t) - k0) + 16
         if self.matching:
             tr = self.p.trigger
-            n += sum(int((b - a) / tr.interval_s) + 2 for a, b in inp.degraded)
+            for a, b in inp.degraded:
+                samples = int(np.searchsorted(inp.imu_t, b) - np.searchsorted(inp.imu_t, a))
+                n += min(int((b - a) / tr.interval_s), samples) + 2
         return n
 
     def loop(self, i0: int, at: Checkpoint | None) -> None:
@@ -674,10 +686,14 @@ class Driver:
                     if self.matching and self.p.extensions.gap_route_bridge:
                         self._bridge_gaps_until(t_try)
                     f.advance(t_try)
+                    growth = 0.0
                     if self.p.extensions.along_drift_evidence:
                         q = along_drift_psd(f.out[: f.n_out], a, t_try)
-                        share = self.p.noise.along_drift_share
-                        grow_along_velocity(f.P, f.x, share * q * tr.interval_s)
+                        growth = self.p.noise.along_drift_share * q * tr.interval_s
+                        grow_along_velocity(f.P, f.x, growth)
+                    if skipped := self._attempts_in_imu_gap(a, k, t_try):
+                        grow_along_velocity(f.P, f.x, growth * skipped)
+                        k += skipped
                 d = float(f.aux[A_DIST])
                 if d - dist_a >= tr.min_outage_distance_m and d - dist_last >= spacing:
                     if not redo:
@@ -693,6 +709,26 @@ class Driver:
                 self._release_turn(i, a, b)
             at = None
         f.advance(math.inf)
+
+    def _attempts_in_imu_gap(self, a: float, k: int, t_try: float) -> int:
+        """How many attempt times after attempt ``k`` (at ``t_try``, in the outage starting at
+        ``a``) to pass over at once: those inside an IMU gap holding more than
+        :data:`ATTEMPTS_WALKED` of them (a clock that jumped days or years forward), but the
+        last. Inside a gap nothing moves and no attempt is made; only the along-track growth
+        (``extensions.along_drift_evidence``) goes on, the same at each once the output rows
+        are a drift window behind, and the caller adds it for all of them at once. Walked,
+        the attempts would take a loop iteration per interval of the gap."""
+        f = self.filt
+        i = int(f.idx[I_IMU])
+        imu_t = self.inp.imu_t
+        if i >= len(imu_t) or f.n_out == 0:
+            return 0
+        if t_try < float(f.out[f.n_out - 1, O_T]) + DRIFT_WINDOW_S:
+            return 0
+        tr = self.p.trigger
+        last = math.floor((float(imu_t[i]) - a - tr.min_outage_s) / tr.interval_s)
+        skipped = last - k - 1
+        return skipped if skipped > ATTEMPTS_WALKED else 0
 
     def route_updated(self, a: float, b: float) -> bool:
         """Whether a route update was applied from ``a`` to ``b`` (absolute times)."""
@@ -1718,6 +1754,9 @@ def widen_to_innovation(P: F64, y: F64, s: F64) -> None:
         P[E_POS : E_POS + 2, E_POS : E_POS + 2] += c * np.outer(u, u)
 
 
+ATTEMPTS_WALKED = 100_000
+"""Attempt times inside one IMU gap that the outage loop steps through one by one (28 h at
+the default 1 s); a gap holding more is crossed at once (:meth:`Driver._attempts_in_imu_gap`)."""
 DRIFT_WINDOW_S = 10.0
 """s: the stretch over which a correction along the travel is compared with the along-track
 sigma the filter claimed before it (``extensions.along_drift_evidence``)"""
@@ -1735,10 +1774,14 @@ def along_drift_psd(rows: F64, t_a: float, t: float) -> float:
     ``3 (c^2 - s^2) / tau^3`` adds (covariance matching); the largest over the stretches is
     returned, 0 where every correction is within its sigma (an honest along-track covariance)."""
     w = DRIFT_WINDOW_S
-    ends = np.arange(t_a + 2.0 * w, t + 1e-9, 1.0)
+    tt = rows[:, O_T]
+    if not len(tt):
+        return 0.0
+    # a stretch ending more than a window after the last row holds no row: left out before
+    # it is made (an IMU gap of years would otherwise ask for a stretch per second of it)
+    ends = np.arange(t_a + 2.0 * w, min(t, float(tt[-1]) + w) + 1e-9, 1.0)
     if ends.size == 0:
         return 0.0
-    tt = rows[:, O_T]
     i1 = np.minimum(np.searchsorted(tt, ends, side="right") - 1, len(rows) - 1)
     i0 = np.searchsorted(tt, ends - w, side="right") - 1
     ok = (i0 >= 0) & (i1 > i0)

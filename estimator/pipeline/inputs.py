@@ -18,6 +18,7 @@ from estimator.errors import (
     choices_said,
 )
 from estimator.io import AUTO_TOPICS, TopicChoice, load_log
+from estimator.io.plausibility import in_bulk
 from estimator.io.routefile import RouteLine, read_route_file, route_in_frame
 from estimator.log import Log
 from estimator.nav.frames import LocalFrame
@@ -35,10 +36,12 @@ class Inputs:
 
 
 def frame_of(log: Log) -> LocalFrame:
-    """The session frame: at the first valid GNSS fix, else at the first truth position."""
+    """The session frame: at the first valid GNSS fix that agrees with the bulk of them
+    (:func:`~estimator.io.plausibility.in_bulk`), else at the first truth position."""
     g = log.gnss
-    ok = g.valid
-    if ok.any():
+    ok = np.flatnonzero(g.valid)
+    if len(ok):
+        ok = ok[in_bulk(g.lat[ok], g.lon[ok])]
         return LocalFrame.at(g.lat[ok], g.lon[ok], g.alt[ok])
     t = log.truth
     if t is not None and np.any(np.isfinite(t.lat) & np.isfinite(t.lon)):

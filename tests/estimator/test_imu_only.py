@@ -171,6 +171,15 @@ def test_a_correction_beyond_the_along_track_sigma_is_a_velocity_random_walk() -
     assert along_drift_psd(_drifting_rows((0.0, 50.0), 10.0), 0.0, 60.0) == 0.0
 
 
+def test_the_along_drift_evidence_after_a_clock_jump_of_years_is_the_same_and_small() -> None:
+    """An attempt years after the last output row (a clock that jumped forward inside the
+    outage): the stretches that end beyond the rows hold no row and say nothing, so the
+    evidence is that of the rows, found without a stretch per second of the jump."""
+    rows = _drifting_rows((-50.0, 0.0), 10.0)
+    years = 10 * 365.25 * 86400.0 * 1e6  # a million times 10 years: 3e14 stretches of 1 s
+    assert along_drift_psd(rows, 0.0, years) == along_drift_psd(rows, 0.0, 60.0)
+
+
 def test_the_along_drift_grows_the_velocity_variance_along_the_travel_only() -> None:
     x = np.zeros(ly.NX)
     x[ly.X_VEL : ly.X_VEL + 2] = [0.0, 15.0]

@@ -1,10 +1,12 @@
-"""Stamps that lie (issue 16): one corrupt stamp far from its stream, and a clock that jumps
-back mid-log. Each is repaired with a warning naming the stream and what was done, the data
-is kept, and the run ends as the clean log's does."""
+"""Stamps that lie (issue 16): one corrupt stamp far from its stream, a clock that jumps
+back mid-log, and one that jumps years forward. Each is repaired (or carried across) with a
+warning naming the stream and what was done, the data is kept, and the run ends as the clean
+log's does, in the memory and time of the data, not of the span its stamps claim."""
 
 from __future__ import annotations
 
 import dataclasses
+import tracemalloc
 from pathlib import Path
 
 import numpy as np
@@ -109,3 +111,39 @@ def test_a_clock_that_jumps_back_keeps_all_the_data(
     _, route, clean_rmse = clean
     # truth was stamped by the recorder: compare on the sensors' mended clock
     assert _rmse(log_path, route, tmp_path / "cache") < clean_rmse + 2.0
+
+
+def test_a_clock_that_jumps_years_forward_runs_in_the_memory_of_its_data(
+    tmp_path: Path, clean: tuple[Path, Path, float]
+) -> None:
+    """Every stream's stamps jump 10 years forward halfway through the drive (audit F2): the
+    output rows were allocated at the output rate over the whole span (893 GiB asked) and the
+    outage's attempts walked it a second at a time. Now the run takes what the data needs,
+    and the jump is one IMU-gap warning line naming its span."""
+    sim = base_sim()
+    mid = float(sim.imu.t[len(sim.imu.t) // 2])
+
+    def stepped(t: np.ndarray) -> np.ndarray:
+        return np.where(t > mid, t + 10 * YEAR_S, t)
+
+    log_path = write_log(
+        tmp_path / "clock_step_10y.mcap",
+        imu=dataclasses.replace(sim.imu, t=stepped(sim.imu.t)),
+        gnss=dataclasses.replace(sim.gnss, t=stepped(sim.gnss.t)),
+        wheel=dataclasses.replace(sim.wheel, t=stepped(sim.wheel.t)),
+        truth=dataclasses.replace(sim.truth_fix, t=stepped(sim.truth_fix.t)),
+    )
+    _, route, _ = clean
+    inputs = open_inputs(log_path, route, cache_dir=tmp_path / "cache")
+    tracemalloc.start()
+    try:
+        runs = run_methods(inputs, Params(), methods=("baseline", "proposed"))
+        _, peak = tracemalloc.get_traced_memory()
+    finally:
+        tracemalloc.stop()
+    assert peak < 200e6, f"{peak / 1e6:.0f} MB"
+    for r in runs.runs.values():
+        assert len(r.epochs.t) < 2 * len(sim.imu.t)
+        assert np.all(np.isfinite(r.epochs.position))
+        gap = [w for w in r.warnings if w.startswith("IMU gap ")]
+        assert len(gap) == 1 and f"{(mid - sim.imu.t[0]):.1f}-" in gap[0], r.warnings

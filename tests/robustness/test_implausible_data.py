@@ -113,3 +113,40 @@ def test_the_warning_reaches_run_info_and_the_export(
     assert "Warnings about this log" in report and "looks like km/h" in report
     summary = (tmp_path / "x" / "summary.csv").read_text(encoding="utf-8")
     assert "looks like km/h" in summary
+
+
+def test_a_first_fix_at_null_island_is_left_out_in_one_line(
+    tmp_path: Path, capsys: pytest.CaptureFixture[str]
+) -> None:
+    """The first valid fix reports 0, 0 with status OK (a receiver's cold start, audit F1):
+    the frame went to null island (198 m errors, info's 905 km of GNSS travel) without a word.
+    Now that fix is left out, named once in run and info, and the run is the one of the log
+    without that fix, estimate for estimate."""
+    from _badinputs import run_cli, write_route
+
+    from estimator.params import Params
+    from estimator.pipeline import open_inputs, run_methods
+
+    g = base_sim().gnss
+    first = int(np.flatnonzero(g.valid)[0])
+    lat, lon, status = g.lat.copy(), g.lon.copy(), g.status.copy()
+    lat[first] = lon[first] = 0.0
+    status[first] = -1
+    bad = write_log(tmp_path / "null_island.mcap", gnss=dataclasses.replace(g, lat=lat, lon=lon))
+    ref = write_log(tmp_path / "no_first_fix.mcap", gnss=dataclasses.replace(g, status=status))
+    route = write_route(tmp_path / "drive.route.geojson")
+    runs = {}
+    for path in (bad, ref):
+        inputs = open_inputs(path, route, cache_dir=tmp_path / "cache")
+        runs[path] = run_methods(inputs, Params(), methods=("proposed",))["proposed"]
+    assert np.array_equal(runs[bad].epochs.position, runs[ref].epochs.position)
+    assert runs[bad].frame == runs[ref].frame
+    code, _, err = run_cli(capsys, ["run", str(bad), "--route", str(route), "--quiet"])
+    lines = err.splitlines()
+    assert code == 0 and len(lines) == 1, err
+    assert lines[0].startswith("routefuse run: warning: null_island.mcap: GNSS /gnss/fix: 1 fix ")
+    assert "at 0.0 s" in lines[0] and "left out" in lines[0]
+    code, out, _ = run_cli(capsys, ["info", str(bad)])
+    assert code == 0 and out.count("null_island.mcap: GNSS /gnss/fix: 1 fix at 0.0 s") == 1
+    gnss_travel = next(line for line in out.splitlines() if "m from GNSS fixes" in line)
+    assert float(gnss_travel.split()[0]) < 1200.0, gnss_travel

@@ -90,3 +90,21 @@ def test_real_car_log_and_route(shared_data: Path) -> None:
     assert inputs.route is not None and inputs.route.length == pytest.approx(1411, abs=1)
     d = route_distances(inputs.log, inputs.route, inputs.frame)
     assert 1.0 < np.median(d) < 3.0
+
+
+def test_frame_sits_at_the_first_fix_that_agrees_with_the_bulk() -> None:
+    """A first fix at 0, 0 (a receiver's cold start, audit F1) is not where the frame goes:
+    the frame sits at the first fix near the median of the log's fixes. A Log built in
+    Python, without the loader's checks, is placed the same way."""
+    from estimator.log import Log
+
+    n = 500
+    t = T0 + 0.01 * np.arange(n)
+    imu = ImuData(t, np.zeros((n, 3)), np.tile([0.0, 0.0, 9.8], (n, 1)))
+    m = n // 10
+    lat = 45.0 + 1e-5 * np.arange(m)
+    lon = np.full(m, 7.0)
+    lat[0], lon[0] = 0.0, 0.0
+    gnss = GnssData(t[::10], lat, lon, np.full(m, 300.0), np.zeros(m, np.int8), np.ones((m, 3)))
+    frame = frame_of(Log("x.mcap", imu, gnss))
+    assert (frame.lat0, frame.lon0) == (lat[1], 7.0)
