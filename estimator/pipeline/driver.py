@@ -737,9 +737,9 @@ class Driver:
     def _walk_by_exits(self, i: int) -> None:
         """At outage ``i``'s start (``extensions.exit_adapt``): if the previous outage, dead
         reckoned (no route update applied in it), ended beyond its sigmas, add to the run's
-        random walk of the horizontal position the least
-        one that would have put that exit within the 95 % bound over the time it ran (from
-        the outage's start to the fix it was judged by), and start this outage with it. The
+        random walk of the horizontal position the least one that would have put that exit
+        within the 95 % bound over the time it ran (from the outage's start to the fix it was
+        judged by), and start this outage with it. The
         previous exit was judged with the walk it had, so the walks add up; the fixes after
         an outage end the kernel's walk (``A_POS_WALK``), not the run's (``A_EXIT_WALK``,
         carried in the filter's state through checkpoints). A walk of the position alone
