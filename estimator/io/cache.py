@@ -10,6 +10,7 @@ import json
 import os
 import tempfile
 import time
+import zipfile
 from collections.abc import Callable
 from pathlib import Path
 from typing import Any
@@ -58,11 +59,25 @@ def cached_log(
             with contextlib.suppress(OSError):
                 os.utime(entry)  # recently used: pruned last
             return log
-        except (OSError, ValueError, KeyError, TypeError):
-            pass
+        except _DAMAGED_ENTRY:
+            pass  # decoded again below, and the entry replaced
     log = read()
     _save(entry, log)
     return log
+
+
+_DAMAGED_ENTRY = (
+    OSError,
+    ValueError,
+    KeyError,
+    TypeError,
+    EOFError,
+    zipfile.BadZipFile,
+)
+"""What reading an entry cut short, overwritten or of another layout raises: a cache miss. A
+crash or a full disk leaves an entry cut short only when it was written in place; :func:`_save`
+writes a temporary file and renames it, but an entry from another tool or a damaged disk is
+still read as a miss, never an error."""
 
 
 def _files_of(path: Path) -> list[Path]:
@@ -93,9 +108,10 @@ def _content_hash(path: Path, cache: Path | None) -> str:
     settled = time.time() - newest > _RACY_SECONDS
     memo = cache / f"stat-{stat_key}.txt" if cache is not None and settled else None
     if memo is not None and memo.is_file():
-        text = memo.read_text().strip()
-        if len(text) == 64:
-            return text
+        with contextlib.suppress(OSError):
+            text = memo.read_bytes().decode("ascii", "replace").strip()
+            if len(text) == 64 and all(c in "0123456789abcdef" for c in text):
+                return text
     h = hashlib.sha256()
     for f in files:
         h.update(str(f.relative_to(path) if path.is_dir() else "").encode())
@@ -149,12 +165,22 @@ def _from_npz(path: Path, data: Any) -> Log:
 
 
 def _save(target: Path, log: Log) -> None:
+    """Write the entry whole or not at all: into a temporary file in the cache folder, flushed
+    to the disk, then renamed over ``target`` (a rename within a folder is atomic), so a crash
+    or a full disk leaves the old entry or none, and no temporary file behind."""
     with contextlib.suppress(OSError):
         target.parent.mkdir(parents=True, exist_ok=True)
         fd, tmp = tempfile.mkstemp(dir=target.parent, prefix=".tmp-", suffix=".npz")
-        with os.fdopen(fd, "wb") as fh:
-            np.savez(fh, **_to_npz(log))
-        os.replace(tmp, target)
+        try:
+            with os.fdopen(fd, "wb") as fh:
+                np.savez(fh, **_to_npz(log))
+                fh.flush()
+                os.fsync(fh.fileno())
+            os.replace(tmp, target)
+        except BaseException:
+            with contextlib.suppress(OSError):
+                os.unlink(tmp)
+            raise
         prune(target.parent, keep=target)
 
 
