@@ -20,8 +20,9 @@ import numpy as np
 from estimator.io.topics import TopicChoice
 from estimator.log import GnssData, ImuData, Log, TopicInfo, TruthData, WheelData
 
-CACHE_VERSION = 6
-"""5: logs whose IMU and GNSS share no time are refused (they were cached as decoded)"""
+CACHE_VERSION = 7
+"""5: logs whose IMU and GNSS share no time are refused (they were cached as decoded); 7: a
+warning naming the log's file is stored without the name (:func:`_stored_warning`)"""
 CACHE_MAX_BYTES = 2_000_000_000
 """Least recently used cache entries are removed beyond this total size."""
 
@@ -140,7 +141,11 @@ def _to_npz(log: Log) -> dict[str, Any]:
         if part is not None:
             for f in dataclasses.fields(part):
                 arrays[f"{name}.{f.name}"] = getattr(part, f.name)
-    meta = {"topics": [dataclasses.asdict(t) for t in log.topics], "warnings": list(log.warnings)}
+    name = Path(log.path).name
+    meta = {
+        "topics": [dataclasses.asdict(t) for t in log.topics],
+        "warnings": [_stored_warning(w, name) for w in log.warnings],
+    }
     arrays["meta"] = np.array(json.dumps(meta))
     return arrays
 
@@ -160,8 +165,28 @@ def _from_npz(path: Path, data: Any) -> Log:
         part("wheel", WheelData),
         part("truth", TruthData),
         tuple(TopicInfo(**t) for t in meta["topics"]),
-        tuple(meta["warnings"]),
+        tuple(_told_warning(w, path.name) for w in meta["warnings"]),
     )
+
+
+_FILE_NAMED = "file"
+
+
+def _stored_warning(warning: str, name: str) -> list[str]:
+    """A warning as the cache keeps it: ``["file", rest]`` when it begins with the log's file
+    name (``first.mcap: cut off ...``), else ``["", warning]``. The cache is keyed by content,
+    so a byte-identical copy under another name is served the same entry, and must be told its
+    own name, not the first file's."""
+    prefix = f"{name}: "
+    if name and warning.startswith(prefix):
+        return [_FILE_NAMED, warning[len(prefix) :]]
+    return ["", warning]
+
+
+def _told_warning(stored: list[str], name: str) -> str:
+    """The warning of :func:`_stored_warning` for the log named ``name``."""
+    kind, text = stored
+    return f"{name}: {text}" if kind == _FILE_NAMED else str(text)
 
 
 def _save(target: Path, log: Log) -> None:

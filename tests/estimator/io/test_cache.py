@@ -81,3 +81,20 @@ def test_a_failed_write_leaves_no_entry_and_no_temporary_file(
     cache = tmp_path / "cache"
     cached_log(SAMPLE, SAMPLE, AUTO_TOPICS, cache_dir=cache, read=lambda: sample_log)
     assert [p.name for p in cache.iterdir() if not p.name.startswith("stat-")] == []
+
+
+def test_a_cached_warning_names_the_file_given(tmp_path: Path) -> None:
+    """The cache is keyed by content: a byte-identical copy is served the first file's entry,
+    and its warnings name the copy, even once the first file is gone."""
+    first, second = tmp_path / "first.mcap", tmp_path / "second.mcap"
+    first.write_bytes(SAMPLE.read_bytes()[:100_000])
+    shutil.copyfile(first, second)
+    cache = tmp_path / "cache"
+    decoded = load_log(first, cache_dir=cache)
+    assert any(w.startswith("first.mcap: cut off") for w in decoded.warnings)
+    first.unlink()
+    served = load_log(second, cache_dir=cache)
+    assert len(list(cache.glob("log-*.npz"))) == 1
+    assert any(w.startswith("second.mcap: cut off") for w in served.warnings)
+    assert not any("first.mcap" in w for w in served.warnings)
+    assert len(served.warnings) == len(decoded.warnings)
