@@ -11,9 +11,11 @@ from __future__ import annotations
 import csv
 import io
 import json
+import math
 import os
 import re
 import stat
+import sys
 import xml.etree.ElementTree as ET
 from dataclasses import dataclass
 from pathlib import Path
@@ -229,8 +231,13 @@ def _short(text: str, limit: int = 60) -> str:
 
 
 def _num(value: Any) -> float:
+    """A coordinate as a float: NaN when it is not a number, and an integer too large for a
+    float (JSON's 400-digit integers) infinite, as a float would read it, so that it is refused
+    as a non-finite coordinate."""
     try:
         return float(value)
+    except OverflowError:
+        return math.inf if value > 0 else -math.inf
     except (TypeError, ValueError):
         return float("nan")
 
@@ -245,6 +252,12 @@ def _geojson_lines(p: Path, text: str) -> list[_Candidate]:
         raise RouteError(p, f"not valid JSON (line {exc.lineno}: {exc.msg})") from None
     except RecursionError:
         raise RouteError(p, "JSON nested too deeply to be a route") from None
+    except ValueError:  # an integer of more digits than Python converts
+        raise RouteError(
+            p,
+            f"not valid JSON for a route: an integer of more than "
+            f"{sys.get_int_max_str_digits()} digits",
+        ) from None
     if not isinstance(doc, dict) or "type" not in doc:
         raise RouteError(p, "not GeoJSON (no 'type' member)")
     kind = doc["type"]

@@ -222,6 +222,18 @@ def test_an_int_choice_is_an_index_and_the_message_says_where_to_choose(tmp_path
             '{"type": "LineString", "coordinates": [[11.5, 48.1], [NaN, 48.2]]}',
             "route point 1 has a non-finite coordinate",
         ),
+        pytest.param(
+            "bigint.geojson",
+            f'{{"type": "LineString", "coordinates": [[{"9" * 400}, 43.7], [7.42, 43.73]]}}',
+            "route point 0 has a non-finite coordinate",
+            id="bigint.geojson",
+        ),
+        pytest.param(
+            "bigint5000.geojson",
+            f'{{"type": "LineString", "coordinates": [[{"9" * 5000}, 43.7], [7.42, 43.73]]}}',
+            "not valid JSON for a route: an integer of more than 4300 digits",
+            id="bigint5000.geojson",
+        ),
         ("range.csv", "lat,lon\n48.1,11.5\n148.1,11.5\n", "route point 1 is out of range"),
         (
             "swapped.geojson",
