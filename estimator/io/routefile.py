@@ -40,6 +40,11 @@ MAX_XML_DEPTH = 64
 """GPX and KML nest a few levels (KML folders a few more)."""
 MAX_XML_ELEMENTS = 4_000_000
 """Elements of a GPX or KML file: each costs memory in the parsed tree."""
+MAX_ROUTE_HEIGHT_M = 10_000.0
+"""|height| of a route point, m: roads lie between the Dead Sea's shore (-0.43 km) and Umling La
+(5.8 km), and ellipsoidal heights differ from sea level by at most about 0.1 km. A height
+beyond this is another unit (centimetres, millimetres) or corrupt; 1e300 overflowed the frame's
+conversion (a numpy warning, then a route placed nowhere)."""
 MAX_LISTED_LINES = 12
 """Lines named in a message; the rest are counted."""
 
@@ -112,6 +117,14 @@ def _to_line(p: Path, chosen: _Candidate) -> RouteLine:
             p,
             f"route point {i} is out of range (lat {lat[i]:g}, lon {lon[i]:g}); "
             "expected degrees with |lat| <= 90 and |lon| <= 180",
+        )
+    wild = ~np.isnan(alt) & ~(np.abs(alt) <= MAX_ROUTE_HEIGHT_M)
+    if wild.any():
+        i = int(np.flatnonzero(wild)[0])
+        raise RouteError(
+            p,
+            f"route point {i} has a height of {alt[i]:g} m; a road lies within "
+            f"{MAX_ROUTE_HEIGHT_M / 1000:g} km of sea level (heights in another unit?)",
         )
     return RouteLine(lat, lon, alt, chosen.name or p.stem, str(p))
 

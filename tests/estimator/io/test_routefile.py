@@ -229,6 +229,13 @@ def test_an_int_choice_is_an_index_and_the_message_says_where_to_choose(tmp_path
             id="bigint.geojson",
         ),
         pytest.param(
+            "bigint_alt.geojson",
+            f'{{"type": "LineString", "coordinates": [[7.4, 43.7, -{"9" * 400}], [7.42, 43.73]]}}',
+            "route point 0 has a height of -inf m",
+            id="bigint_alt.geojson",
+        ),
+        ("cm.csv", "lat,lon,alt\n48.1,11.5,52000\n48.2,11.6,52100\n", "height of 52000 m"),
+        pytest.param(
             "bigint5000.geojson",
             f'{{"type": "LineString", "coordinates": [[{"9" * 5000}, 43.7], [7.42, 43.73]]}}',
             "not valid JSON for a route: an integer of more than 4300 digits",
