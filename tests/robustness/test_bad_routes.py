@@ -60,6 +60,15 @@ def _text(tmp: Path, name: str, text: str) -> Path:
     return path
 
 
+USA = [[-100.0, 40.0], [-100.1, 40.1]]
+
+
+def _multilinestring(tmp: Path, name: str, parts: list[list[list[float]]]) -> Path:
+    path = tmp / name
+    path.write_text(json.dumps({"type": "MultiLineString", "coordinates": parts}))
+    return path
+
+
 def _bytes(tmp: Path, name: str, data: bytes) -> Path:
     path = tmp / name
     path.write_bytes(data)
@@ -139,6 +148,16 @@ CASES: list[tuple[str, Make, str]] = [
         "JSON nested too deeply",
     ),
     ("huge file", lambda t, c: _huge(t, "huge.geojson"), "route files over 50 MB are refused"),
+    (
+        "MultiLineString parts 8000 km apart",
+        lambda t, c: _multilinestring(t, "multi_far.geojson", [route_lonlat(), USA]),
+        "are 8",
+    ),
+    (
+        "two points, from the drive to the USA",
+        lambda t, c: _linestring(t, "to_usa.geojson", [route_lonlat()[0], USA[0]]),
+        "route points 0 and 1 are 8",
+    ),
     (
         "heights of 1e300 m",
         lambda t, c: _linestring(t, "alt.geojson", [[*p, 1e300] for p in route_lonlat()]),
