@@ -132,6 +132,41 @@ class Route:
         ends = self.point_at([s0, s1])
         return np.vstack([ends[:1], self.xy[inner], ends[1:]])
 
+    def distance_to(self, points: ArrayLike) -> F64:
+        """Distance of each point from the nearest point of the route, m, as
+        ``project(points).distance`` gives it, in time near-linear in points and vertices.
+        :meth:`project` without a window measures every point against every segment: 2000
+        fixes against a 1.9 M-vertex route took minutes. Here the route is cut into pieces
+        no longer than its mean segment (at most twice as many pieces as segments), their
+        midpoints put in a k-d tree; a point's nearest midpoint, ``q`` away, bounds its
+        distance from above, and every piece holding its foot point has its midpoint within
+        ``q`` plus half a piece, so only those pieces' segments are measured exactly."""
+        from scipy.spatial import cKDTree
+
+        p = np.atleast_2d(np.asarray(points, np.float64))[:, :2]
+        if not len(p):
+            return np.zeros(0)
+        L = self.seglen
+        piece = self.length / len(L)
+        pieces = np.maximum(np.ceil(L / piece), 1).astype(np.intp)
+        seg_of = np.repeat(np.arange(len(L)), pieces)
+        first = np.cumsum(pieces) - pieces
+        along = (np.arange(len(seg_of)) - first[seg_of] + 0.5) * (L / pieces)[seg_of]
+        midpoints = self.xy[:-1][seg_of] + along[:, None] * self.unit[seg_of]
+        reach = float(np.max(L / pieces)) / 2 * (1 + 1e-9) + 1e-9
+        tree = cKDTree(midpoints)
+        nearest, _ = tree.query(p)
+        near = tree.query_ball_point(p, nearest + reach)
+        counts = np.fromiter((len(k) for k in near), np.intp, len(near))
+        owner = np.repeat(np.arange(len(p)), counts)
+        seg = seg_of[np.fromiter((i for k in near for i in k), np.intp, int(counts.sum()))]
+        rel = p[owner] - self.xy[seg]
+        foot_along = np.clip(np.einsum("nj,nj->n", rel, self.unit[seg]), 0.0, L[seg])
+        gap = rel - foot_along[:, None] * self.unit[seg]
+        out = np.full(len(p), np.inf)
+        np.minimum.at(out, owner, np.hypot(gap[:, 0], gap[:, 1]))
+        return out
+
     def project(
         self,
         points: ArrayLike,

@@ -10,6 +10,7 @@ import json
 import os
 import tempfile
 import time
+import zipfile
 from collections.abc import Callable
 from pathlib import Path
 from typing import Any
@@ -19,8 +20,9 @@ import numpy as np
 from estimator.io.topics import TopicChoice
 from estimator.log import GnssData, ImuData, Log, TopicInfo, TruthData, WheelData
 
-CACHE_VERSION = 8
-"""5: logs whose IMU and GNSS share no time are refused (they were cached as decoded); 8: fixes
+CACHE_VERSION = 9
+"""5: logs whose IMU and GNSS share no time are refused (they were cached as decoded); 7: a
+warning naming the log's file is stored without the name (:func:`_stored_warning`); 8: fixes
 far from the bulk of a log's are left out, streams on another clock than the IMU's named"""
 CACHE_MAX_BYTES = 2_000_000_000
 """Least recently used cache entries are removed beyond this total size."""
@@ -59,11 +61,25 @@ def cached_log(
             with contextlib.suppress(OSError):
                 os.utime(entry)  # recently used: pruned last
             return log
-        except (OSError, ValueError, KeyError, TypeError):
-            pass
+        except _DAMAGED_ENTRY:
+            pass  # decoded again below, and the entry replaced
     log = read()
     _save(entry, log)
     return log
+
+
+_DAMAGED_ENTRY = (
+    OSError,
+    ValueError,
+    KeyError,
+    TypeError,
+    EOFError,
+    zipfile.BadZipFile,
+)
+"""What reading an entry cut short, overwritten or of another layout raises: a cache miss. A
+crash or a full disk leaves an entry cut short only when it was written in place; :func:`_save`
+writes a temporary file and renames it, but an entry from another tool or a damaged disk is
+still read as a miss, never an error."""
 
 
 def _files_of(path: Path) -> list[Path]:
@@ -94,9 +110,10 @@ def _content_hash(path: Path, cache: Path | None) -> str:
     settled = time.time() - newest > _RACY_SECONDS
     memo = cache / f"stat-{stat_key}.txt" if cache is not None and settled else None
     if memo is not None and memo.is_file():
-        text = memo.read_text().strip()
-        if len(text) == 64:
-            return text
+        with contextlib.suppress(OSError):
+            text = memo.read_bytes().decode("ascii", "replace").strip()
+            if len(text) == 64 and all(c in "0123456789abcdef" for c in text):
+                return text
     h = hashlib.sha256()
     for f in files:
         h.update(str(f.relative_to(path) if path.is_dir() else "").encode())
@@ -125,7 +142,11 @@ def _to_npz(log: Log) -> dict[str, Any]:
         if part is not None:
             for f in dataclasses.fields(part):
                 arrays[f"{name}.{f.name}"] = getattr(part, f.name)
-    meta = {"topics": [dataclasses.asdict(t) for t in log.topics], "warnings": list(log.warnings)}
+    name = Path(log.path).name
+    meta = {
+        "topics": [dataclasses.asdict(t) for t in log.topics],
+        "warnings": [_stored_warning(w, name) for w in log.warnings],
+    }
     arrays["meta"] = np.array(json.dumps(meta))
     return arrays
 
@@ -145,17 +166,47 @@ def _from_npz(path: Path, data: Any) -> Log:
         part("wheel", WheelData),
         part("truth", TruthData),
         tuple(TopicInfo(**t) for t in meta["topics"]),
-        tuple(meta["warnings"]),
+        tuple(_told_warning(w, path.name) for w in meta["warnings"]),
     )
 
 
+_FILE_NAMED = "file"
+
+
+def _stored_warning(warning: str, name: str) -> list[str]:
+    """A warning as the cache keeps it: ``["file", rest]`` when it begins with the log's file
+    name (``first.mcap: cut off ...``), else ``["", warning]``. The cache is keyed by content,
+    so a byte-identical copy under another name is served the same entry, and must be told its
+    own name, not the first file's."""
+    prefix = f"{name}: "
+    if name and warning.startswith(prefix):
+        return [_FILE_NAMED, warning[len(prefix) :]]
+    return ["", warning]
+
+
+def _told_warning(stored: list[str], name: str) -> str:
+    """The warning of :func:`_stored_warning` for the log named ``name``."""
+    kind, text = stored
+    return f"{name}: {text}" if kind == _FILE_NAMED else str(text)
+
+
 def _save(target: Path, log: Log) -> None:
+    """Write the entry whole or not at all: into a temporary file in the cache folder, flushed
+    to the disk, then renamed over ``target`` (a rename within a folder is atomic), so a crash
+    or a full disk leaves the old entry or none, and no temporary file behind."""
     with contextlib.suppress(OSError):
         target.parent.mkdir(parents=True, exist_ok=True)
         fd, tmp = tempfile.mkstemp(dir=target.parent, prefix=".tmp-", suffix=".npz")
-        with os.fdopen(fd, "wb") as fh:
-            np.savez(fh, **_to_npz(log))
-        os.replace(tmp, target)
+        try:
+            with os.fdopen(fd, "wb") as fh:
+                np.savez(fh, **_to_npz(log))
+                fh.flush()
+                os.fsync(fh.fileno())
+            os.replace(tmp, target)
+        except BaseException:
+            with contextlib.suppress(OSError):
+                os.unlink(tmp)
+            raise
         prune(target.parent, keep=target)
 
 

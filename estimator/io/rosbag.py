@@ -26,6 +26,11 @@ ROS1_MAGIC = b"#ROSBAG V2.0\n"
 """First bytes of a ROS 1 bag and of an mcap file: checked before the (whole-file) content hash,
 so a large file of the wrong kind is refused at once."""
 ROS2_METADATA = "metadata.yaml"
+MAX_METADATA_BYTES = 4_000_000
+"""A ROS 2 bag's ``metadata.yaml`` lists its topics and files: a few kB, about 1 MB for a bag of
+a thousand topics. rosbags parses it whole, at about 3 MB/s and 3x its size in memory (a
+150 MB one took 46 s and 500 MB), so a larger one is refused from its size, before it is read
+(as route files are over ``MAX_ROUTE_BYTES`` and configs over ``MAX_CONFIG_BYTES``)."""
 
 
 class _CallbackRaised(Exception):
@@ -242,12 +247,28 @@ class Ros2BagFolder(_RosbagsLog):
         if path.is_dir():
             if not (path / ROS2_METADATA).is_file():
                 raise LogError(path, "folder is not a ROS 2 bag (it has no metadata.yaml)")
-            return path
+            return _metadata_bounded(path)
         suffix = path.suffix.lower()
         if suffix in (".db3", ".mcap") and _in_bag_folder(path):
-            return path.parent
+            return _metadata_bounded(path.parent)
         if suffix == ".db3":
             raise LogError(
                 path, "a .db3 file is read with its bag folder (metadata.yaml is missing)"
             )
         return None
+
+
+def _metadata_bounded(folder: Path) -> Path:
+    """``folder`` when its ``metadata.yaml`` is a regular file of at most
+    :data:`MAX_METADATA_BYTES`; else a one-line :class:`LogError` naming that file."""
+    metadata = folder / ROS2_METADATA
+    info = metadata.stat()
+    if not stat.S_ISREG(info.st_mode):
+        raise LogError(metadata, "not a regular file (a fifo or a device is not read)")
+    if info.st_size > MAX_METADATA_BYTES:
+        raise LogError(
+            metadata,
+            f"file is {info.st_size / 1e6:.1f} MB; a bag's metadata over "
+            f"{MAX_METADATA_BYTES / 1e6:g} MB is refused (it lists topics and files: a few kB)",
+        )
+    return folder

@@ -9,11 +9,14 @@ route file's cost is bounded: bytes, points, XML elements and nesting.
 from __future__ import annotations
 
 import csv
+import dataclasses
 import io
 import json
+import math
 import os
 import re
 import stat
+import sys
 import xml.etree.ElementTree as ET
 from dataclasses import dataclass
 from pathlib import Path
@@ -38,6 +41,20 @@ MAX_XML_DEPTH = 64
 """GPX and KML nest a few levels (KML folders a few more)."""
 MAX_XML_ELEMENTS = 4_000_000
 """Elements of a GPX or KML file: each costs memory in the parsed tree."""
+MAX_ROUTE_HEIGHT_M = 10_000.0
+"""|height| of a route point, m: roads lie between the Dead Sea's shore (-0.43 km) and Umling La
+(5.8 km), and ellipsoidal heights differ from sea level by at most about 0.1 km. A height
+beyond this is another unit (centimetres, millimetres) or corrupt; 1e300 overflowed the frame's
+conversion (a numpy warning, then a route placed nowhere)."""
+MAX_ROUTE_SEGMENT_M = 50_000.0
+"""Distance between consecutive points of a route, m. A road-level map has a vertex at every
+bend (routes built by :mod:`estimator.io.routebuild` every 25 m), so a straight segment of tens
+of km is already rare and one over 50 km joins places no road joins directly: MultiLineString
+parts from different regions, a stray point, a route across continents. It would be taken for a
+road (matched against, counted in the route's length), so it is refused, not joined silently.
+Tens of km, not a few: a hand-drawn motorway with a click every 20 km is still a usable route."""
+EARTH_RADIUS_M = 6_371_008.8
+"""Mean Earth radius (IUGG), for the great-circle length of a route's segments."""
 MAX_LISTED_LINES = 12
 """Lines named in a message; the rest are counted."""
 
@@ -57,6 +74,11 @@ class RouteLine:
 class _Candidate:
     name: str
     points: list[tuple[float, float, float]]
+    part_starts: tuple[int, ...] = ()
+    """index of the first point of each part after the first (a MultiLineString's lines, a
+    track's segments, a placemark's LineStrings), which the file's line joins end to end"""
+    part_kind: str = "part"
+    """what the file calls a part, for messages"""
 
 
 def read_route_file(path: str | Path, *, feature: str | int | None = None) -> RouteLine:
@@ -111,7 +133,48 @@ def _to_line(p: Path, chosen: _Candidate) -> RouteLine:
             f"route point {i} is out of range (lat {lat[i]:g}, lon {lon[i]:g}); "
             "expected degrees with |lat| <= 90 and |lon| <= 180",
         )
+    wild = ~np.isnan(alt) & ~(np.abs(alt) <= MAX_ROUTE_HEIGHT_M)
+    if wild.any():
+        i = int(np.flatnonzero(wild)[0])
+        raise RouteError(
+            p,
+            f"route point {i} has a height of {alt[i]:g} m; a road lies within "
+            f"{MAX_ROUTE_HEIGHT_M / 1000:g} km of sea level (heights in another unit?)",
+        )
+    _check_segments(p, chosen, lat, lon)
     return RouteLine(lat, lon, alt, chosen.name or p.stem, str(p))
+
+
+def _check_segments(p: Path, chosen: _Candidate, lat: F64, lon: F64) -> None:
+    """A one-line :class:`RouteError` at the first segment longer than
+    :data:`MAX_ROUTE_SEGMENT_M`, naming its points, where they are and, where the file joins
+    two of its parts there, which part begins."""
+    length = great_circle_m(lat[:-1], lon[:-1], lat[1:], lon[1:])
+    too_long = np.flatnonzero(length > MAX_ROUTE_SEGMENT_M)
+    if not len(too_long):
+        return
+    i = int(too_long[0])
+    joined = ""
+    if i + 1 in chosen.part_starts:
+        k = chosen.part_starts.index(i + 1) + 1
+        joined = f" (the join of {chosen.part_kind}s {k - 1} and {k})"
+    raise RouteError(
+        p,
+        f"route points {i} and {i + 1} are {length[i] / 1000:.1f} km apart{joined}, from "
+        f"{lat[i]:.5f}, {lon[i]:.5f} to {lat[i + 1]:.5f}, {lon[i + 1]:.5f} (lat, lon); a road "
+        f"route has points at most {MAX_ROUTE_SEGMENT_M / 1000:g} km apart: two places joined?",
+    )
+
+
+def great_circle_m(lat0: F64, lon0: F64, lat1: F64, lon1: F64) -> F64:
+    """Haversine distance, m, on a sphere of :data:`EARTH_RADIUS_M` (within 0.5 % of the
+    ellipsoid's: enough to tell a road's segment from a joined region's)."""
+    phi0, phi1 = np.radians(lat0), np.radians(lat1)
+    half_dphi = (phi1 - phi0) / 2
+    half_dlam = np.radians(lon1 - lon0) / 2
+    h = np.sin(half_dphi) ** 2 + np.cos(phi0) * np.cos(phi1) * np.sin(half_dlam) ** 2
+    distance: F64 = 2 * EARTH_RADIUS_M * np.arcsin(np.sqrt(np.clip(h, 0.0, 1.0)))
+    return distance
 
 
 def load_route(path: str | Path, frame: LocalFrame, *, feature: str | int | None = None) -> Route:
@@ -229,8 +292,13 @@ def _short(text: str, limit: int = 60) -> str:
 
 
 def _num(value: Any) -> float:
+    """A coordinate as a float: NaN when it is not a number, and an integer too large for a
+    float (JSON's 400-digit integers) infinite, as a float would read it, so that it is refused
+    as a non-finite coordinate."""
     try:
         return float(value)
+    except OverflowError:
+        return math.inf if value > 0 else -math.inf
     except (TypeError, ValueError):
         return float("nan")
 
@@ -245,6 +313,12 @@ def _geojson_lines(p: Path, text: str) -> list[_Candidate]:
         raise RouteError(p, f"not valid JSON (line {exc.lineno}: {exc.msg})") from None
     except RecursionError:
         raise RouteError(p, "JSON nested too deeply to be a route") from None
+    except ValueError:  # an integer of more digits than Python converts
+        raise RouteError(
+            p,
+            f"not valid JSON for a route: an integer of more than "
+            f"{sys.get_int_max_str_digits()} digits",
+        ) from None
     if not isinstance(doc, dict) or "type" not in doc:
         raise RouteError(p, "not GeoJSON (no 'type' member)")
     kind = doc["type"]
@@ -258,18 +332,23 @@ def _geojson_lines(p: Path, text: str) -> list[_Candidate]:
             if line is not None:
                 props = f.get("properties") or {}
                 name = props.get("name") if isinstance(props, dict) else None
-                out.append(_Candidate(str(name) if name is not None else f"feature {i}", line))
+                out.append(
+                    dataclasses.replace(
+                        line, name=str(name) if name is not None else f"feature {i}"
+                    )
+                )
         return out
     if kind == "Feature":
         line = _geojson_geometry(p, doc.get("geometry"))
         props = doc.get("properties") or {}
         name = str(props.get("name", "")) if isinstance(props, dict) else ""
-        return [] if line is None else [_Candidate(name, line)]
+        return [] if line is None else [dataclasses.replace(line, name=name)]
     line = _geojson_geometry(p, doc)
-    return [] if line is None else [_Candidate("", line)]
+    return [] if line is None else [line]
 
 
-def _geojson_geometry(p: Path, geom: Any) -> list[tuple[float, float, float]] | None:
+def _geojson_geometry(p: Path, geom: Any) -> _Candidate | None:
+    """The points of a LineString or MultiLineString (its lines joined end to end), unnamed."""
     if not isinstance(geom, dict):
         return None
     kind, coords = geom.get("type"), geom.get("coordinates")
@@ -283,15 +362,18 @@ def _geojson_geometry(p: Path, geom: Any) -> list[tuple[float, float, float]] | 
     if not isinstance(parts, list):
         raise RouteError(p, f"{kind} without a coordinate list")
     points: list[tuple[float, float, float]] = []
+    starts: list[int] = []
     for part in parts:
         if not isinstance(part, list):
             raise RouteError(p, f"{kind} coordinates are not a list of positions")
+        if points:
+            starts.append(len(points))
         for pos in part:
             if not isinstance(pos, list | tuple) or len(pos) < 2:
                 raise RouteError(p, f"{kind} position {pos!r} is not [lon, lat(, alt)]")
             alt = _num(pos[2]) if len(pos) > 2 else float("nan")
             points.append((_num(pos[1]), _num(pos[0]), alt))
-    return points
+    return _Candidate("", points, tuple(starts), f"{kind} line")
 
 
 # --- XML: GPX and KML ------------------------------------------------------------------------
@@ -360,8 +442,14 @@ def _gpx_lines(p: Path, text: str) -> list[_Candidate]:
 
     out = []
     for i, trk in enumerate(_children(root, "trk")):
-        pts = [point(pt) for seg in _children(trk, "trkseg") for pt in _children(seg, "trkpt")]
-        out.append(_Candidate(_child_text(trk, "name") or f"track {i}", pts))
+        pts: list[tuple[float, float, float]] = []
+        starts: list[int] = []
+        for seg in _children(trk, "trkseg"):
+            if pts:
+                starts.append(len(pts))
+            pts.extend(point(pt) for pt in _children(seg, "trkpt"))
+        name = _child_text(trk, "name") or f"track {i}"
+        out.append(_Candidate(name, pts, tuple(starts), "trkseg"))
     for i, rte in enumerate(_children(root, "rte")):
         pts = [point(pt) for pt in _children(rte, "rtept")]
         out.append(_Candidate(_child_text(rte, "name") or f"route {i}", pts))
@@ -376,14 +464,18 @@ def _kml_lines(p: Path, text: str) -> list[_Candidate]:
     for i, mark in enumerate(el for el in root.iter() if _local(el.tag) == "Placemark"):
         lines = [el for el in mark.iter() if _local(el.tag) == "LineString"]
         pts: list[tuple[float, float, float]] = []
+        starts: list[int] = []
         for line in lines:
+            if pts:
+                starts.append(len(pts))
             for tup in (_child_text(line, "coordinates") or "").split():
                 v = tup.split(",")
                 if len(v) < 2:
                     raise RouteError(p, f"KML coordinate {tup!r} is not lon,lat[,alt]")
                 pts.append((_num(v[1]), _num(v[0]), _num(v[2]) if len(v) > 2 else float("nan")))
         if lines:
-            out.append(_Candidate(_child_text(mark, "name") or f"placemark {i}", pts))
+            name = _child_text(mark, "name") or f"placemark {i}"
+            out.append(_Candidate(name, pts, tuple(starts), "LineString"))
     return out
 
 

@@ -7,7 +7,9 @@ from __future__ import annotations
 import dataclasses
 import difflib
 import math
+import re
 import stat
+import sys
 from collections.abc import Iterator
 from dataclasses import dataclass, fields, is_dataclass, replace
 from pathlib import Path
@@ -113,7 +115,7 @@ def coerce_value(spec: ParamSpec, value: Any, source: str | None = None) -> Any:
             return out
         else:
             out = str(value)
-    except (TypeError, ValueError) as exc:
+    except (TypeError, ValueError, OverflowError) as exc:
         raise ConfigError(
             where, f"{spec.name}: invalid value {_short(repr(value))} ({_short(str(exc))})"
         ) from None
@@ -129,14 +131,16 @@ MAX_MAGNITUDE = 1e9
 
 
 def _check_number(spec: ParamSpec, value: float, where: str | None) -> None:
-    if value != value:
+    """A one-line :class:`ConfigError` for a value that is not finite or out of bounds. An
+    ``int`` is compared as it is: it may be too large to convert to a float."""
+    if isinstance(value, float) and value != value:
         raise ConfigError(where, f"{spec.name}: NaN is not a valid value (not a finite number)")
-    if not math.isfinite(value):
+    if isinstance(value, float) and not math.isfinite(value):
         raise ConfigError(where, f"{spec.name}: {value} is not a finite number")
     lo = spec.lo if spec.lo is not None else (-MAX_MAGNITUDE if spec.type is not int else None)
     hi = spec.hi if spec.hi is not None else (MAX_MAGNITUDE if spec.type is not int else None)
     if (lo is not None and value < lo) or (hi is not None and value > hi):
-        raise ConfigError(where, f"{spec.name}={value} is outside [{lo}, {hi}]")
+        raise ConfigError(where, f"{spec.name}={_short(str(value))} is outside [{lo}, {hi}]")
 
 
 def _short(text: str, limit: int = 80) -> str:
@@ -171,6 +175,20 @@ def parse_assignments(items: list[str]) -> dict[str, str]:
 MAX_CONFIG_BYTES = 1_000_000
 """A parameter file is a few kB; nothing larger (or not a regular file: a fifo, /dev/zero) is
 read."""
+MAX_KEY_PARTS = 32
+"""Parts of a dotted TOML key (``[a.b.c]``, ``a.b.c = 1``) a config may have. A parameter's name
+has two (``gates.min_pairs``); tomllib's time grows with the square of a key's parts (a
+100 000-part table header took 17 s, a 1 MB one would take minutes), so a deeper key is refused
+before it is parsed."""
+
+_TOML_KEY_PART = r"""(?:[A-Za-z0-9_-]++|"(?:[^"\\\n]|\\.)*+"|'[^'\n]*+')"""
+_DEEP_TOML_KEY = re.compile(
+    rf"(?<![A-Za-z0-9_\-\"'\\]){_TOML_KEY_PART}"
+    rf"(?:[ \t]*+\.[ \t]*+{_TOML_KEY_PART}){{{MAX_KEY_PARTS}}}"
+)
+"""More than :data:`MAX_KEY_PARTS` bare or quoted key parts joined by dots, anywhere in the text
+(a string or a comment of 33 dotted words is refused too: no parameter value is one). Started
+only where a part can start, with possessive repeats, so the search is linear in the text."""
 
 
 def load_params(path: str | Path, base: Params | None = None) -> Params:
@@ -184,25 +202,40 @@ def load_params(path: str | Path, base: Params | None = None) -> Params:
             raise ConfigError(path, "not a regular file; a config is a TOML file")
         if info.st_size > MAX_CONFIG_BYTES:
             raise ConfigError(path, f"config is {info.st_size} bytes; over {MAX_CONFIG_BYTES}")
-        data = tomllib.loads(path.read_text(encoding="utf-8"))
+        text = path.read_text(encoding="utf-8")
+        if _DEEP_TOML_KEY.search(text):
+            raise ConfigError(
+                path,
+                f"a key of more than {MAX_KEY_PARTS} dotted parts; parameter names have two "
+                "(gates.min_pairs)",
+            )
+        data = tomllib.loads(text)
     except OSError as exc:
         raise ConfigError(path, f"cannot read config: {exc.strerror or exc}") from None
     except (tomllib.TOMLDecodeError, UnicodeDecodeError) as exc:
         raise ConfigError(path, f"not valid TOML: {exc}") from None
+    except RecursionError:
+        raise ConfigError(path, "not a config: arrays or tables nested too deeply") from None
+    except ValueError:  # tomllib's int(): more digits than Python converts
+        raise ConfigError(
+            path,
+            f"not valid TOML: an integer of more than {sys.get_int_max_str_digits()} digits",
+        ) from None
     flat: dict[str, Any] = {}
-
-    def walk(d: dict[str, Any], prefix: str) -> None:
-        for k, v in d.items():
+    tables: list[tuple[str, Iterator[tuple[str, Any]]]] = [("", iter(data.items()))]
+    while tables:
+        prefix, items = tables[-1]
+        for k, v in items:
             if isinstance(v, dict):
-                walk(v, f"{prefix}{k}.")
-            else:
-                flat[f"{prefix}{k}"] = v
-
-    walk(data, "")
+                tables.append((f"{prefix}{k}.", iter(v.items())))
+                break
+            flat[f"{prefix}{k}"] = v
+        else:
+            tables.pop()
     known = {s.name for s in param_specs()}
     for name in flat:
         if name not in known:
-            raise ConfigError(path, f"unknown parameter {name!r}")
+            raise ConfigError(path, f"unknown parameter {_short(repr(name))}")
     return with_values(base or Params(), flat, str(path))
 
 

@@ -71,7 +71,7 @@ def route_distances(
         xy = xy[np.linspace(0, len(xy) - 1, max_points).astype(np.intp)]
     if not len(xy):
         return np.zeros(0)
-    return route.project(xy).distance
+    return route.distance_to(xy)
 
 
 def _geodesic_gap(log: Log, frame: LocalFrame, line: RouteLine) -> float:

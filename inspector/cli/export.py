@@ -11,6 +11,7 @@ from estimator.errors import ConfigError
 from estimator.io import LOG_FORMATS_TEXT, ROUTE_FORMATS_TEXT, TopicChoice
 from inspector.cli.checks import check_log, check_log_specs, route_for
 from inspector.cli.exit_codes import ExitCode
+from inspector.cli.library_warnings import library_warnings_as_lines
 from inspector.cli.options import (
     add_outage_option,
     add_param_options,
@@ -162,6 +163,11 @@ def _compare(
 
 
 def execute(args: argparse.Namespace) -> int:
+    with library_warnings_as_lines(NAME):
+        return _export(args)
+
+
+def _export(args: argparse.Namespace) -> int:
     from inspector.export import (
         ReplayOptions,
         export_batch,

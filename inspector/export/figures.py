@@ -59,6 +59,16 @@ def _shade(ax: Any, outages: Sequence[tuple[float, float]]) -> None:
         )
 
 
+def _time_span(t: NDArray[np.float64]) -> tuple[float, float]:
+    """The time axis' limits: the first and last epoch, or a second from the first where they
+    coincide (a log of one epoch: matplotlib warned of a singular transformation and widened
+    the axis itself), or 0-1 s with no epoch."""
+    if not len(t):
+        return 0.0, 1.0
+    lo, hi = float(t[0]), float(t[-1])
+    return (lo, hi) if hi > lo else (lo, lo + 1.0)
+
+
 def deviation_figure(plot: DeviationPlot, method: str = "proposed") -> Figure:
     """Position (|cross-track|, m) and heading (deg) deviation from the route against time
     since the log start."""
@@ -75,8 +85,7 @@ def deviation_figure(plot: DeviationPlot, method: str = "proposed") -> Figure:
         ax.grid(alpha=0.3)
     ax_hdg.axhline(0.0, color="k", lw=0.5)
     ax_hdg.set_xlabel("time since log start [s]")
-    if len(plot.t):
-        ax_hdg.set_xlim(float(plot.t[0]), float(plot.t[-1]))
+    ax_hdg.set_xlim(*_time_span(plot.t))
     ax_pos.set_ylim(bottom=0.0)
     ax_pos.legend(loc="upper left", fontsize="small")
     ax_pos.set_title("Deviation from the route: baseline vs " + method)
@@ -135,7 +144,7 @@ def replay_strip(
         )
     axes[0].legend(loc="upper left", fontsize="x-small", ncols=3)
     axes[-1].set_xlabel("log time [s]", fontsize="small")
-    t_lo, t_hi = (float(plot.t[0]), float(plot.t[-1])) if len(plot.t) > 1 else (0.0, 1.0)
+    t_lo, t_hi = _time_span(plot.t)
     axes[-1].set_xlim(t_lo, t_hi)
     fig.draw_without_rendering()
     box = axes[-1].get_window_extent()

@@ -1,6 +1,7 @@
 from __future__ import annotations
 
 import dataclasses
+import time
 from pathlib import Path
 
 import pytest
@@ -122,14 +123,73 @@ def test_a_count_takes_a_whole_float() -> None:
         ("[sensors]\nimu_yaw_deg = 1000.0\n", "is outside"),
         ("[sensors]\nimu_yaw = 1.0\n", "unknown parameter 'sensors.imu_yaw'"),
         ("[sensors\nimu_yaw_deg = 1\n", "not valid TOML"),
+        pytest.param(
+            f"[window]\nlength_m = {'9' * 400}\n",
+            "window.length_m: invalid value 999",
+            id="float-400-digits",
+        ),
+        pytest.param(
+            f"[gates]\nmin_pairs = {'9' * 400}\n", "gates.min_pairs=999", id="int-400-digits"
+        ),
+        pytest.param(
+            f"[window]\nlength_m = {'9' * 5000}\n",
+            "an integer of more than 4300 digits",
+            id="int-5000-digits",
+        ),
+        pytest.param(
+            "a = " + "[" * 100_000 + "]" * 100_000 + "\n", "nested too deeply", id="deep-array"
+        ),
+        pytest.param(
+            "[" + ".".join(["a"] * 5000) + "]\nx = 1\n",
+            "a key of more than 32 dotted parts",
+            id="deep-table",
+        ),
+        pytest.param(
+            ".".join(['"a"'] * 40) + " = 1\n",
+            "a key of more than 32 dotted parts",
+            id="deep-quoted-key",
+        ),
+        pytest.param(
+            "[" + ".".join(["a"] * 20) + "]\nx = 1\n",
+            "unknown parameter 'a.a.a.a.a.a.a",
+            id="table-20-deep",
+        ),
     ],
 )
 def test_bad_toml_files(tmp_path: Path, text: str, problem: str) -> None:
+    """Each is one line naming the file: numbers too large for a float or for Python's integer
+    conversion, arrays nested past the recursion limit, keys deeper than any parameter's."""
     path = tmp_path / "bad.toml"
     path.write_text(text)
     with pytest.raises(ConfigError) as err:
         load_params(path)
-    assert str(err.value).startswith(str(path)) and problem in str(err.value)
+    message = str(err.value)
+    assert message.startswith(str(path)) and problem in message
+    assert "\n" not in message and len(message) < 300
+
+
+def test_a_key_half_a_megabyte_deep_is_refused_at_once(tmp_path: Path) -> None:
+    """tomllib's time grows with the square of a key's parts: 17 s at 100 000 parts."""
+    path = tmp_path / "deep.toml"
+    path.write_text("[" + ".".join(["a"] * 490_000) + "]\n")
+    started = time.perf_counter()
+    with pytest.raises(ConfigError, match="a key of more than 32 dotted parts"):
+        load_params(path)
+    assert time.perf_counter() - started < 2.0
+
+
+@pytest.mark.parametrize(
+    "text",
+    [
+        "# see a.b.c.d.e.f.g.h for more\n[gates]\nmin_pairs = 4\n",
+        "[gates]\nmin_pairs = 4\n[sensors]\ngnss_lever_arm_m = [0.5, 1.5, 2.5]\n",
+        "gates.min_pairs = 4\n",
+    ],
+)
+def test_dotted_words_short_of_the_limit_are_read(tmp_path: Path, text: str) -> None:
+    path = tmp_path / "ok.toml"
+    path.write_text(text)
+    assert load_params(path).gates.min_pairs == 4
 
 
 def test_missing_config_and_bad_assignment(tmp_path: Path) -> None:

@@ -8,6 +8,7 @@ from __future__ import annotations
 import json
 import time
 import tracemalloc
+import warnings
 from collections.abc import Callable
 from pathlib import Path
 
@@ -56,6 +57,15 @@ def _linestring(tmp: Path, name: str, coords: list[list[float]]) -> Path:
 def _text(tmp: Path, name: str, text: str) -> Path:
     path = tmp / name
     path.write_text(text)
+    return path
+
+
+USA = [[-100.0, 40.0], [-100.1, 40.1]]
+
+
+def _multilinestring(tmp: Path, name: str, parts: list[list[list[float]]]) -> Path:
+    path = tmp / name
+    path.write_text(json.dumps({"type": "MultiLineString", "coordinates": parts}))
     return path
 
 
@@ -138,6 +148,26 @@ CASES: list[tuple[str, Make, str]] = [
         "JSON nested too deeply",
     ),
     ("huge file", lambda t, c: _huge(t, "huge.geojson"), "route files over 50 MB are refused"),
+    (
+        "MultiLineString parts 8000 km apart",
+        lambda t, c: _multilinestring(t, "multi_far.geojson", [route_lonlat(), USA]),
+        "are 8",
+    ),
+    (
+        "two points, from the drive to the USA",
+        lambda t, c: _linestring(t, "to_usa.geojson", [route_lonlat()[0], USA[0]]),
+        "route points 0 and 1 are 8",
+    ),
+    (
+        "heights of 1e300 m",
+        lambda t, c: _linestring(t, "alt.geojson", [[*p, 1e300] for p in route_lonlat()]),
+        "route point 0 has a height of 1e+300 m; a road lies within 10 km of sea level",
+    ),
+    (
+        "heights in millimetres",
+        lambda t, c: _linestring(t, "alt_mm.geojson", [[*p, 250_000.0] for p in route_lonlat()]),
+        "route point 0 has a height of 250000 m",
+    ),
 ]
 IDS = [c[0] for c in CASES]
 
@@ -159,6 +189,17 @@ def test_cli_exits_3_with_one_line(
 ) -> None:
     path = corpus.build(f"route: {name}", make)
     assert_cli_error(capsys, cli_argv(command, corpus.valid(), path), path, problem)
+
+
+def test_a_wild_height_warns_nothing_before_its_error(tmp_path: Path, corpus: Corpus) -> None:
+    """1e300 m overflowed the frame's conversion: a numpy RuntimeWarning on stderr, then a
+    refusal saying the route was 0.0 km away and more than 5 km away."""
+    path = corpus.build("route: heights of 1e300 m", CASES[-2][1])
+    with warnings.catch_warnings(record=True) as caught:
+        warnings.simplefilter("always")
+        with pytest.raises(RouteError, match="height of 1e\\+300 m"):
+            open_inputs(corpus.valid(), path, cache_dir=tmp_path / "cache")
+    assert [str(w.message) for w in caught] == []
 
 
 def test_far_route_error_measures_the_distance(tmp_path: Path, corpus: Corpus) -> None:

@@ -1,6 +1,7 @@
 from __future__ import annotations
 
 import os
+import time
 from pathlib import Path
 
 import numpy as np
@@ -11,6 +12,7 @@ from rosbags.typesys import Stores, get_typestore
 
 from estimator.errors import LogError
 from estimator.io import BagTopics, StaticTransform, TopicChoice, load_log, write_bag
+from estimator.io.rosbag import MAX_METADATA_BYTES
 from estimator.log import GnssData, ImuData, TruthData, WheelData
 
 T0 = 1_700_000_000.0
@@ -426,3 +428,42 @@ def test_cache_keeps_to_its_size_limit(tmp_path: Path, monkeypatch) -> None:
     os.utime(entry, (1.0, 1.0))  # log0 is the least recently used
     load_log(paths[2], cache_dir=cache)
     assert len(list(cache.glob("log-*.npz"))) == 2 and not entry.exists()
+
+
+def test_a_huge_metadata_yaml_is_refused_from_its_size(tmp_path: Path) -> None:
+    """rosbags parses metadata.yaml whole: 150 MB took 46 s and 500 MB. One over
+    MAX_METADATA_BYTES is refused before it is read, named, in one line; the bag's files,
+    named instead of the folder, are refused alike."""
+    imu, gnss, *_ = _streams()
+    bag = tmp_path / "sqlbag"
+    write_bag(bag, imu=imu, gnss=gnss, storage="sqlite3")
+    metadata = bag / "metadata.yaml"
+    text = metadata.read_text()
+    assert "custom_data: null" in text
+    metadata.write_text(
+        text.replace("custom_data: null", 'custom_data: {k: "' + "x" * 5_000_000 + '"}')
+    )
+    assert metadata.stat().st_size > MAX_METADATA_BYTES
+    (db3,) = bag.glob("*.db3")
+    for given in (bag, db3):
+        started = time.perf_counter()
+        with pytest.raises(LogError) as err:
+            load_log(given, cache_dir=tmp_path / "c")
+        assert str(err.value) == (
+            f"{metadata}: file is 5.0 MB; a bag's metadata over 4 MB is refused "
+            "(it lists topics and files: a few kB)"
+        )
+        assert time.perf_counter() - started < 1.0
+
+
+def test_metadata_yaml_within_the_limit_is_read(tmp_path: Path) -> None:
+    imu, gnss, *_ = _streams()
+    bag = tmp_path / "sqlbag"
+    write_bag(bag, imu=imu, gnss=gnss, storage="sqlite3")
+    metadata = bag / "metadata.yaml"
+    metadata.write_text(
+        metadata.read_text().replace(
+            "custom_data: null", 'custom_data: {k: "' + "x" * 100_000 + '"}'
+        )
+    )
+    assert len(load_log(bag, cache_dir=tmp_path / "c").imu.t) == len(imu.t)

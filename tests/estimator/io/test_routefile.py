@@ -8,6 +8,7 @@ import pytest
 
 from estimator.errors import RouteError, WhereToChoose
 from estimator.io import load_route, read_route_file
+from estimator.io.routefile import MAX_ROUTE_SEGMENT_M
 from estimator.nav import LocalFrame
 
 LAT = [48.1000, 48.1010, 48.1020, 48.1025]
@@ -222,6 +223,25 @@ def test_an_int_choice_is_an_index_and_the_message_says_where_to_choose(tmp_path
             '{"type": "LineString", "coordinates": [[11.5, 48.1], [NaN, 48.2]]}',
             "route point 1 has a non-finite coordinate",
         ),
+        pytest.param(
+            "bigint.geojson",
+            f'{{"type": "LineString", "coordinates": [[{"9" * 400}, 43.7], [7.42, 43.73]]}}',
+            "route point 0 has a non-finite coordinate",
+            id="bigint.geojson",
+        ),
+        pytest.param(
+            "bigint_alt.geojson",
+            f'{{"type": "LineString", "coordinates": [[7.4, 43.7, -{"9" * 400}], [7.42, 43.73]]}}',
+            "route point 0 has a height of -inf m",
+            id="bigint_alt.geojson",
+        ),
+        ("cm.csv", "lat,lon,alt\n48.1,11.5,52000\n48.2,11.6,52100\n", "height of 52000 m"),
+        pytest.param(
+            "bigint5000.geojson",
+            f'{{"type": "LineString", "coordinates": [[{"9" * 5000}, 43.7], [7.42, 43.73]]}}',
+            "not valid JSON for a route: an integer of more than 4300 digits",
+            id="bigint5000.geojson",
+        ),
         ("range.csv", "lat,lon\n48.1,11.5\n148.1,11.5\n", "route point 1 is out of range"),
         (
             "swapped.geojson",
@@ -247,6 +267,56 @@ def test_bad_route_files(tmp_path: Path, name: str, text: str, problem: str) -> 
         read_route_file(path)
     msg = str(err.value)
     assert msg.startswith(f"{path}: ") and problem in msg and "\n" not in msg
+
+
+FAR_PARTS = {
+    "parts.geojson": json.dumps(
+        {
+            "type": "MultiLineString",
+            "coordinates": [[[7.40, 43.70], [7.41, 43.71]], [[-100.0, 40.0], [-100.1, 40.1]]],
+        }
+    ),
+    "parts.gpx": (
+        '<gpx version="1.1"><trk><trkseg><trkpt lat="43.70" lon="7.40"/>'
+        '<trkpt lat="43.71" lon="7.41"/></trkseg><trkseg><trkpt lat="40.0" lon="-100.0"/>'
+        '<trkpt lat="40.1" lon="-100.1"/></trkseg></trk></gpx>'
+    ),
+    "parts.kml": (
+        "<kml><Placemark><MultiGeometry><LineString><coordinates>7.40,43.70 7.41,43.71"
+        "</coordinates></LineString><LineString><coordinates>-100.0,40.0 -100.1,40.1"
+        "</coordinates></LineString></MultiGeometry></Placemark></kml>"
+    ),
+}
+
+
+@pytest.mark.parametrize(
+    ("name", "part"),
+    [
+        ("parts.geojson", "MultiLineString lines"),
+        ("parts.gpx", "trksegs"),
+        ("parts.kml", "LineStrings"),
+    ],
+)
+def test_parts_far_apart_are_refused_where_they_are_joined(
+    tmp_path: Path, name: str, part: str
+) -> None:
+    path = _write(tmp_path / name, FAR_PARTS[name])
+    with pytest.raises(RouteError) as err:
+        read_route_file(path)
+    message = str(err.value)
+    assert message.startswith(f"{path}: route points 1 and 2 are 8")
+    assert f"km apart (the join of {part} 0 and 1), from 43.71000, 7.41000 to 40.00000" in message
+    assert "at most 50 km apart" in message and "\n" not in message
+
+
+def test_a_segment_just_over_the_limit_is_refused(tmp_path: Path) -> None:
+    """49.5 km between two points is a (hand-drawn) road; 50.5 km is not."""
+    dlat = MAX_ROUTE_SEGMENT_M / 111_195
+    ok = _write(tmp_path / "ok.csv", f"lat,lon\n48,11\n{48 + 0.99 * dlat},11\n")
+    assert len(read_route_file(ok).lat) == 2
+    far = _write(tmp_path / "far.csv", f"lat,lon\n48,11\n{48 + 1.01 * dlat},11\n")
+    with pytest.raises(RouteError, match=r"route points 0 and 1 are 50\.5 km apart, from 48"):
+        read_route_file(far)
 
 
 def test_missing_and_binary_files(tmp_path: Path) -> None:
