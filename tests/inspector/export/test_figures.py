@@ -1,5 +1,6 @@
-"""The report's figures on a log of one epoch (an IMU whose stamps span 7.5 ms): matplotlib
-warned of identical x limits, a warning with its source line on export's stderr."""
+"""The report's figures on a run of one epoch (the audit found it on an IMU whose stamps span
+7.5 ms, which the loader now refuses): matplotlib warned of identical x limits, a warning with
+its source line on export's stderr."""
 
 from __future__ import annotations
 
