@@ -92,6 +92,23 @@ def test_real_car_log_and_route(shared_data: Path) -> None:
     assert 1.0 < np.median(d) < 3.0
 
 
+def test_route_distances_through_the_tree_equal_the_exact_ones(
+    shared_data: Path, monkeypatch: pytest.MonkeyPatch
+) -> None:
+    """Above ``EXACT_DISTANCE_PAIRS`` the distances come from the k-d tree, which ``routefuse
+    run`` would otherwise import for every route."""
+    import estimator.pipeline.inputs as inputs_module
+
+    inputs = open_inputs(
+        shared_data / "comma2k19" / "i280.mcap", shared_data / "comma2k19" / "i280_route.geojson"
+    )
+    assert inputs.route is not None
+    exact = route_distances(inputs.log, inputs.route, inputs.frame)
+    monkeypatch.setattr(inputs_module, "EXACT_DISTANCE_PAIRS", 0)
+    through_tree = route_distances(inputs.log, inputs.route, inputs.frame)
+    np.testing.assert_allclose(through_tree, exact, atol=1e-9)
+
+
 def test_frame_sits_at_the_first_fix_that_agrees_with_the_bulk() -> None:
     """A first fix at 0, 0 (a receiver's cold start, audit F1) is not where the frame goes:
     the frame sits at the first fix near the median of the log's fixes. A Log built in
