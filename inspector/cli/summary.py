@@ -22,6 +22,13 @@ ESTIMATED_RATE_NOTE = (
 )
 """The line under the topic table when a rate is only count / span."""
 SMOOTHING_FIXES = 5
+WHEEL_GAP_MIN_S = 0.5
+WHEEL_GAP_INTERVALS = 5.0
+"""wheel samples further apart than both (as the filter, which does not interpolate across
+them) are not integrated across: over a recording paused, or a clock that jumped a day, the
+last speed times the gap is no distance driven"""
+SILENT_S = 5.0
+"""every stream silent longer than this (the filter's IMU gap) is named in ``info``"""
 
 
 @dataclass(frozen=True)
@@ -101,12 +108,14 @@ def distances_travelled(log: Log, frame: LocalFrame | None) -> tuple[tuple[str, 
     out: list[tuple[str, float]] = []
     if log.wheel is not None and len(log.wheel.t) > 1:
         w = log.wheel
-        out.append(
-            (
-                "wheel-speed integral",
-                float(np.sum(0.5 * np.abs(w.speed[1:] + w.speed[:-1]) * np.diff(w.t))),
-            )
-        )
+        dt_w = np.diff(w.t)
+        bridged = dt_w <= max(WHEEL_GAP_MIN_S, WHEEL_GAP_INTERVALS * float(np.median(dt_w)))
+        step = 0.5 * np.abs(w.speed[1:] + w.speed[:-1]) * dt_w
+        skipped = int(np.count_nonzero(~bridged))
+        label = "wheel-speed integral"
+        if skipped:
+            label += f" ({skipped} gap{'s' if skipped > 1 else ''} between samples left out)"
+        out.append((label, float(np.sum(step[bridged]))))
     ok = log.gnss.valid
     if frame is not None and np.count_nonzero(ok) > SMOOTHING_FIXES:
         enu = frame.to_enu(log.gnss.lat[ok], log.gnss.lon[ok], log.gnss.alt[ok])[:, :2]
@@ -121,6 +130,32 @@ def distances_travelled(log: Log, frame: LocalFrame | None) -> tuple[tuple[str, 
         enu = frame.to_enu(tr.lat, tr.lon, tr.alt)[:, :2]
         out.append(("ground truth", _path_length(enu[np.all(np.isfinite(enu), axis=1)])))
     return tuple(out)
+
+
+def _duration(seconds: float) -> str:
+    for unit, size in (("days", 86400.0), ("h", 3600.0), ("min", 60.0)):
+        if seconds >= 2 * size:
+            return f"{seconds / size:.1f} {unit}"
+    return f"{seconds:.1f} s"
+
+
+def _silences(log: Log, streams: dict[str, NDArray[np.float64]]) -> tuple[str, ...]:
+    """One line per stretch in which no stream has a sample (longer than :data:`SILENT_S`):
+    a paused recording, or a clock that jumped forward. It shows otherwise only as a GNSS
+    outage, which reads as a tunnel."""
+    imu = streams["imu"]
+    gaps = np.flatnonzero(np.diff(imu) > SILENT_S)
+    lines = []
+    for k in gaps:
+        a, b = float(imu[k]), float(imu[k + 1])
+        if any(np.any((t > a) & (t < b)) for t in streams.values()):
+            continue
+        lines.append(
+            f"{Path(log.path).name}: every stream is silent at {a - log.t_start:.1f}-"
+            f"{b - log.t_start:.1f} s ({_duration(b - a)}): the recording paused, or its "
+            "clock jumped forward"
+        )
+    return tuple(lines)
 
 
 def summarize(inputs: Inputs | Log) -> LogSummary:
@@ -148,6 +183,7 @@ def summarize(inputs: Inputs | Log) -> LogSummary:
             rate = info.count / span if span > 0 else float("nan")
         lines.append(TopicLine(info.topic, info.msgtype, info.count, rate, info.role, measured))
     outages, thr = gnss_outages(log)
+    silences = _silences(log, streams)
     route_summary = None
     if route is not None and frame is not None:
         r = route
@@ -166,7 +202,7 @@ def summarize(inputs: Inputs | Log) -> LogSummary:
         outages=outages,
         outage_threshold_s=thr,
         distances=distances_travelled(log, frame),
-        warnings=log.warnings + (route.warnings if route is not None else ()),
+        warnings=log.warnings + silences + (route.warnings if route is not None else ()),
         route=route_summary,
     )
 

@@ -147,3 +147,41 @@ def test_a_clock_that_jumps_years_forward_runs_in_the_memory_of_its_data(
         assert np.all(np.isfinite(r.epochs.position))
         gap = [w for w in r.warnings if w.startswith("IMU gap ")]
         assert len(gap) == 1 and f"{(mid - sim.imu.t[0]):.1f}-" in gap[0], r.warnings
+
+
+def test_info_names_a_jump_every_stream_shares_and_integrates_no_wheel_speed_across_it(
+    tmp_path: Path,
+) -> None:
+    """A day's jump of every stream showed in ``info`` as a GNSS outage only, which reads as a
+    tunnel, and the wheel-speed integral took the last speed over the whole day."""
+    from inspector.cli.summary import distances_travelled, format_summary, summarize
+
+    sim = base_sim()
+    mid = float(sim.imu.t[len(sim.imu.t) // 2])
+
+    def stepped(t: np.ndarray) -> np.ndarray:
+        return np.where(t > mid, t + 86_400.0, t)
+
+    jumped = write_log(
+        tmp_path / "clock_step_1d.mcap",
+        imu=dataclasses.replace(sim.imu, t=stepped(sim.imu.t)),
+        gnss=dataclasses.replace(sim.gnss, t=stepped(sim.gnss.t)),
+        wheel=dataclasses.replace(sim.wheel, t=stepped(sim.wheel.t)),
+        truth=dataclasses.replace(sim.truth_fix, t=stepped(sim.truth_fix.t)),
+    )
+    clean = write_log(tmp_path / "clean.mcap")
+    text = format_summary(summarize(load_log(jumped, cache_dir=tmp_path / "cache")))
+    (line,) = [w for w in text.splitlines() if "every stream is silent" in w]
+    assert line.startswith("warning   clock_step_1d.mcap: every stream is silent at ")
+    assert "(24.0 h): the recording paused, or its clock jumped forward" in line
+    wheel = {
+        path: next(
+            d
+            for name, d in distances_travelled(load_log(path, cache_dir=tmp_path / "cache"), None)
+            if "wheel" in name
+        )
+        for path in (jumped, clean)
+    }
+    assert wheel[jumped] == pytest.approx(wheel[clean], rel=0.01)
+    clean_text = format_summary(summarize(load_log(clean, cache_dir=tmp_path / "cache")))
+    assert "silent" not in clean_text and "left out" not in clean_text
