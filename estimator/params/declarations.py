@@ -746,14 +746,14 @@ class ExtensionParams:
     )
     exit_adapt: bool = param(
         True,
-        "where an outage ended farther from the fixes after it than its sigmas allow (the exit "
-        "check, chi-square over 13.8), each later outage's horizontal position takes a random "
-        "walk (until a fix is accepted after it): the least that would have put that exit "
-        "within the 95 % bound over the time it ran, the walks of several such exits added. "
-        "Dead reckoning shown to drift beyond its model is not trusted to the same sigmas "
-        "again; only the covariance widens (the estimates of dead reckoning do not move), "
-        "so route updates weigh more and pass their gates more readily; a run whose exits "
-        "all pass is unchanged",
+        "where a dead-reckoned outage (no route update applied in it, the IMU running) ended "
+        "farther from the fixes after it than its sigmas allow (the exit check, chi-square "
+        "over 13.8), each later outage's horizontal position takes a random walk (until a fix "
+        "is accepted after it): the least that would have put that exit within the 95 % bound "
+        "over the time it ran, the walks of several such exits added. Dead reckoning shown to "
+        "drift beyond its model is not trusted to the same sigmas again; only the covariance "
+        "widens (no dead-reckoned estimate moves inside the outage), so route updates weigh "
+        "more and pass their gates more readily; a run whose exits all pass is unchanged",
     )
     search_correction_cap: bool = param(
         False,
