@@ -11,7 +11,6 @@ from estimator.errors import ConfigError
 from estimator.io import LOG_FORMATS_TEXT, ROUTE_FORMATS_TEXT, TopicChoice
 from inspector.cli.checks import check_log, check_log_specs, route_for
 from inspector.cli.exit_codes import ExitCode
-from inspector.cli.library_warnings import library_warnings_as_lines
 from inspector.cli.options import (
     add_outage_option,
     add_param_options,
@@ -20,6 +19,7 @@ from inspector.cli.options import (
     params_from_args,
     parse_outage,
 )
+from inspector.library_warnings import library_warnings_as_lines
 from inspector.numbers import signed
 
 NAME = "export"

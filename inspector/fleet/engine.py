@@ -68,6 +68,7 @@ from estimator.io import TopicChoice
 from estimator.params import params_to_toml
 from inspector.fleet.plan import SweepPlan, Task, estimator_source, format_values
 from inspector.fleet.table import failed_row, one_line, read_task_file, task_row
+from inspector.library_warnings import library_warnings_recorded
 
 if TYPE_CHECKING:
     from distributed import Client, Future
@@ -253,10 +254,14 @@ def run_task(job: TaskJob, decode_error: str | None) -> dict[str, Any]:
             )
         if task.log.route is None:
             raise RoutefuseError(None, task.log.route_error or "no route")
-        if job.export_dir is not None:
-            document, seconds, files = _export(job)
-        else:
-            document, seconds = _run(job)
+        with library_warnings_recorded() as told:
+            if job.export_dir is not None:
+                document, seconds, files = _export(job)
+            else:
+                document, seconds = _run(job)
+        if told:
+            said = document.get("warnings", [])
+            document["warnings"] = [*said, *(w for w in told if w not in said)]
         seconds["total_s"] = time.perf_counter() - started
         row = task_row(
             task,

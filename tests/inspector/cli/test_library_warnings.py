@@ -7,7 +7,7 @@ import warnings
 
 import pytest
 
-from inspector.cli.library_warnings import library_warnings_as_lines
+from inspector.library_warnings import library_warnings_as_lines
 
 
 def _library_call() -> None:

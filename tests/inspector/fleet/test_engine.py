@@ -365,3 +365,40 @@ def test_a_task_on_a_worker_of_other_code_fails_instead_of_writing_an_ok_row(tmp
     assert row["status"] != "ok"
     assert "this worker runs another routefuse" in row["error"]
     assert "the client's 0123456789abcdef" in row["error"]
+
+
+def test_a_library_warning_in_a_task_is_one_of_its_warnings_not_a_worker_printout(
+    tmp_path, short_drive, monkeypatch, capfd
+):
+    """A worker process has no terminal of its own: a Python warning raised in a task (a
+    figure of one instant, a numpy edge case) was printed by the worker with its source line
+    into the client's terminal; now it is a line of the task's warnings, once."""
+    import warnings
+
+    import inspector.fleet.engine as engine
+    from inspector.fleet.engine import TaskJob, run_task
+
+    original = engine._run
+
+    def run_warning_twice(job):
+        for _ in range(2):
+            warnings.warn("identical low and high xlims\nsecond line", UserWarning, stacklevel=1)
+        return original(job)
+
+    monkeypatch.setattr(engine, "_run", run_warning_twice)
+    log = copy_drive(short_drive, tmp_path / "logs", "drive")
+    task = SweepPlan(collect_logs([str(log)]), build_sets([])).tasks()[0]
+    job = TaskJob(
+        task=task,
+        topics=TopicChoice(),
+        cache_dir=str(tmp_path / "cache"),
+        task_file=str(tmp_path / "task.json"),
+        export_dir=None,
+        replay=None,
+        estimator_source=None,
+    )
+    row = run_task(job, None)
+    assert row["status"] == "ok", row
+    told = [w for w in row["warnings"].split("; ") if "xlims" in w]
+    assert told == ["UserWarning: identical low and high xlims"]
+    assert "xlims" not in capfd.readouterr().err

@@ -27,8 +27,7 @@ def library_warnings_as_lines(command: str) -> Iterator[None]:
         file: TextIO | None = None,
         line: str | None = None,
     ) -> None:
-        lines = str(message).strip().splitlines()
-        text = f"{category.__name__}: {lines[0] if lines else '(no message)'}"
+        text = warning_line(message, category)
         if text not in told:
             told.add(text)
             print(f"routefuse {command}: warning: {text}", file=sys.stderr, flush=True)
@@ -36,3 +35,20 @@ def library_warnings_as_lines(command: str) -> Iterator[None]:
     with warnings.catch_warnings():
         warnings.showwarning = tell
         yield
+
+
+def warning_line(message: Warning | str, category: type[Warning]) -> str:
+    """``<Category>: <first line of the message>``."""
+    lines = str(message).strip().splitlines()
+    return f"{category.__name__}: {lines[0] if lines else '(no message)'}"
+
+
+@contextmanager
+def library_warnings_recorded() -> Iterator[list[str]]:
+    """Inside, the Python warnings the filters let through are kept (each once, as
+    :func:`warning_line`) in the list yielded, not printed: a sweep's worker process has no
+    terminal of its own, so they go into the log's results, as its warnings."""
+    kept: list[str] = []
+    with warnings.catch_warnings(record=True) as caught:
+        yield kept
+    kept.extend(dict.fromkeys(warning_line(w.message, w.category) for w in caught))
