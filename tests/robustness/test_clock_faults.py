@@ -113,6 +113,23 @@ def test_a_clock_that_jumps_back_keeps_all_the_data(
     assert _rmse(log_path, route, tmp_path / "cache") < clean_rmse + 2.0
 
 
+def _every_clock_jumped(path: Path, seconds: float) -> Path:
+    """The base drive with every stream's stamps ``seconds`` later from halfway through."""
+    sim = base_sim()
+    mid = float(sim.imu.t[len(sim.imu.t) // 2])
+
+    def stepped(t: np.ndarray) -> np.ndarray:
+        return np.where(t > mid, t + seconds, t)
+
+    return write_log(
+        path,
+        imu=dataclasses.replace(sim.imu, t=stepped(sim.imu.t)),
+        gnss=dataclasses.replace(sim.gnss, t=stepped(sim.gnss.t)),
+        wheel=dataclasses.replace(sim.wheel, t=stepped(sim.wheel.t)),
+        truth=dataclasses.replace(sim.truth_fix, t=stepped(sim.truth_fix.t)),
+    )
+
+
 def test_a_clock_that_jumps_years_forward_runs_in_the_memory_of_its_data(
     tmp_path: Path, clean: tuple[Path, Path, float]
 ) -> None:
@@ -122,17 +139,7 @@ def test_a_clock_that_jumps_years_forward_runs_in_the_memory_of_its_data(
     and the jump is one IMU-gap warning line naming its span."""
     sim = base_sim()
     mid = float(sim.imu.t[len(sim.imu.t) // 2])
-
-    def stepped(t: np.ndarray) -> np.ndarray:
-        return np.where(t > mid, t + 10 * YEAR_S, t)
-
-    log_path = write_log(
-        tmp_path / "clock_step_10y.mcap",
-        imu=dataclasses.replace(sim.imu, t=stepped(sim.imu.t)),
-        gnss=dataclasses.replace(sim.gnss, t=stepped(sim.gnss.t)),
-        wheel=dataclasses.replace(sim.wheel, t=stepped(sim.wheel.t)),
-        truth=dataclasses.replace(sim.truth_fix, t=stepped(sim.truth_fix.t)),
-    )
+    log_path = _every_clock_jumped(tmp_path / "clock_step_10y.mcap", 10 * YEAR_S)
     _, route, _ = clean
     inputs = open_inputs(log_path, route, cache_dir=tmp_path / "cache")
     tracemalloc.start()
@@ -156,19 +163,7 @@ def test_info_names_a_jump_every_stream_shares_and_integrates_no_wheel_speed_acr
     tunnel, and the wheel-speed integral took the last speed over the whole day."""
     from inspector.cli.summary import distances_travelled, format_summary, summarize
 
-    sim = base_sim()
-    mid = float(sim.imu.t[len(sim.imu.t) // 2])
-
-    def stepped(t: np.ndarray) -> np.ndarray:
-        return np.where(t > mid, t + 86_400.0, t)
-
-    jumped = write_log(
-        tmp_path / "clock_step_1d.mcap",
-        imu=dataclasses.replace(sim.imu, t=stepped(sim.imu.t)),
-        gnss=dataclasses.replace(sim.gnss, t=stepped(sim.gnss.t)),
-        wheel=dataclasses.replace(sim.wheel, t=stepped(sim.wheel.t)),
-        truth=dataclasses.replace(sim.truth_fix, t=stepped(sim.truth_fix.t)),
-    )
+    jumped = _every_clock_jumped(tmp_path / "clock_step_1d.mcap", 86_400.0)
     clean = write_log(tmp_path / "clean.mcap")
     text = format_summary(summarize(load_log(jumped, cache_dir=tmp_path / "cache")))
     (line,) = [w for w in text.splitlines() if "every stream is silent" in w]

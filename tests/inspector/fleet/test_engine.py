@@ -346,21 +346,27 @@ def test_a_worker_on_other_code_is_refused_before_any_task(tmp_path, short_drive
     assert not list((tmp_path / "out" / "tasks").glob("*.json"))  # nothing ran
 
 
-def test_a_task_on_a_worker_of_other_code_fails_instead_of_writing_an_ok_row(tmp_path, short_drive):
-    """A worker that joins after the check still cannot write a row under this code's id."""
-    from inspector.fleet.engine import TaskJob, run_task
+def _task_job(task, tmp_path, *, estimator_source):
+    from inspector.fleet.engine import TaskJob
 
-    log = copy_drive(short_drive, tmp_path / "logs", "drive")
-    task = SweepPlan(collect_logs([str(log)]), build_sets([])).tasks()[0]
-    job = TaskJob(
+    return TaskJob(
         task=task,
         topics=TopicChoice(),
         cache_dir=str(tmp_path / "cache"),
         task_file=str(tmp_path / "task.json"),
         export_dir=None,
         replay=None,
-        estimator_source="0123456789abcdef",
+        estimator_source=estimator_source,
     )
+
+
+def test_a_task_on_a_worker_of_other_code_fails_instead_of_writing_an_ok_row(tmp_path, short_drive):
+    """A worker that joins after the check still cannot write a row under this code's id."""
+    from inspector.fleet.engine import run_task
+
+    log = copy_drive(short_drive, tmp_path / "logs", "drive")
+    task = SweepPlan(collect_logs([str(log)]), build_sets([])).tasks()[0]
+    job = _task_job(task, tmp_path, estimator_source="0123456789abcdef")
     row = run_task(job, None)
     assert row["status"] != "ok"
     assert "this worker runs another routefuse" in row["error"]
@@ -376,7 +382,7 @@ def test_a_library_warning_in_a_task_is_one_of_its_warnings_not_a_worker_printou
     import warnings
 
     import inspector.fleet.engine as engine
-    from inspector.fleet.engine import TaskJob, run_task
+    from inspector.fleet.engine import run_task
 
     original = engine._run
 
@@ -388,15 +394,7 @@ def test_a_library_warning_in_a_task_is_one_of_its_warnings_not_a_worker_printou
     monkeypatch.setattr(engine, "_run", run_warning_twice)
     log = copy_drive(short_drive, tmp_path / "logs", "drive")
     task = SweepPlan(collect_logs([str(log)]), build_sets([])).tasks()[0]
-    job = TaskJob(
-        task=task,
-        topics=TopicChoice(),
-        cache_dir=str(tmp_path / "cache"),
-        task_file=str(tmp_path / "task.json"),
-        export_dir=None,
-        replay=None,
-        estimator_source=None,
-    )
+    job = _task_job(task, tmp_path, estimator_source=None)
     row = run_task(job, None)
     assert row["status"] == "ok", row
     told = [w for w in row["warnings"].split("; ") if "xlims" in w]
