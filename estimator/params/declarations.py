@@ -938,6 +938,17 @@ class NoiseParams:
         hi=10.0,
         step=0.01,
     )
+    exit_walk_max_m2_s: float = param(
+        100.0,
+        "with extensions.exit_adapt, the largest random walk of the horizontal position the "
+        "exits of a run add up to (100 m^2/s: a 100 m sigma after 100 s): fixes worse than "
+        "they claim (a receiver's wander at walking speed) can flag every outage, and the "
+        "walks must not then grow without end; the IMU-only sims' largest is 12.7",
+        unit="m^2/s",
+        lo=0.0,
+        hi=10000.0,
+        step=1.0,
+    )
     accel_bias_tau_s: float = param(
         3600.0, "accelerometer bias correlation time", unit="s", lo=1, hi=100000, step=10
     )

@@ -740,7 +740,8 @@ class Driver:
         random walk of the horizontal position the least one that would have put that exit
         within the 95 % bound over the time it ran (from the outage's start to the fix it was
         judged by), and start this outage with it. The
-        previous exit was judged with the walk it had, so the walks add up; the fixes after
+        previous exit was judged with the walk it had, so the walks add up (to
+        ``noise.exit_walk_max_m2_s`` at most); the fixes after
         an outage end the kernel's walk (``A_POS_WALK``), not the run's (``A_EXIT_WALK``,
         carried in the filter's state through checkpoints). A walk of the position alone
         moves no dead-reckoned estimate inside the outage (no other state is correlated with
@@ -763,7 +764,8 @@ class Driver:
                 gapped = (self.gap_ends > x.start) & (self.gap_ends <= x.fix_t[1])
                 if x.overconfident and not self.route_updated(x.start, x.end) and not gapped.any():
                     excess = isotropic_excess(x.error, x.estimate_cov + x.fix_cov, NEES_95_2DOF)
-                    f.aux[A_EXIT_WALK] += excess / max(x.fix_t[0] - x.start, 1.0)
+                    walk = f.aux[A_EXIT_WALK] + excess / max(x.fix_t[0] - x.start, 1.0)
+                    f.aux[A_EXIT_WALK] = min(walk, self.p.noise.exit_walk_max_m2_s)
         f.aux[A_POS_WALK] = f.aux[A_EXIT_WALK]
 
     def _release_turn(self, i: int, a: float, b: float) -> None:

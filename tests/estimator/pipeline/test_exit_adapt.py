@@ -100,6 +100,19 @@ def test_the_next_outage_is_widened_by_the_walk_its_predecessor_lacked_and_nothi
     assert on.exits[1].estimate_sigma_m > 2.0 * second.estimate_sigma_m
 
 
+def test_the_walk_is_capped(sim6: Inputs) -> None:
+    """Fixes worse than they claim could flag every outage; the walks must not add up without
+    end (``noise.exit_walk_max_m2_s``; sim 6's first exit asks 12.7 m^2/s)."""
+    capped = with_values(Params(), {"noise.exit_walk_max_m2_s": 1.0})
+    on = run(sim6.log, sim6.route, capped, method="baseline", frame=sim6.frame)
+    off = _baseline(sim6, False)
+    a2, b2 = off.degraded_intervals[1]
+    t = off.epochs.t
+    k = np.flatnonzero((t >= a2) & (t < b2))
+    added = on.epochs.position_sigma[k, 0] ** 2 - off.epochs.position_sigma[k, 0] ** 2
+    np.testing.assert_allclose(added, 1.0 * (t[k] - a2), rtol=0.02, atol=0.5)
+
+
 def test_an_outage_the_route_updates_pulled_off_widens_nothing(sim6: Inputs) -> None:
     """routefuse's second outage on sim 6 ends beyond its sigmas with route updates applied:
     the route's error, which a wider dead-reckoning covariance would let pull harder."""
