@@ -30,6 +30,15 @@ class WheelData:
     """(N,) forward speed, m/s"""
 
 
+def wheel_gap_s(t: F64) -> float:
+    """Wheel samples further apart than this (s) have a gap between them: five of the stream's
+    median intervals, half a second at least. The filter does not interpolate the speed across
+    it, nor ``info`` integrate it: over a paused recording, or a clock that jumped, the last
+    speed times the gap is no distance driven."""
+    interval = float(np.median(np.diff(t))) if len(t) > 1 else 0.0
+    return max(0.5, 5 * interval)
+
+
 @dataclass(frozen=True)
 class GnssData:
     t: F64

@@ -63,7 +63,7 @@ from estimator.filter.layout import (
 )
 from estimator.filter.moving_mean import moving_mean
 from estimator.io.plausibility import off_the_imu_clock
-from estimator.log import Log
+from estimator.log import Log, wheel_gap_s
 from estimator.nav.earth import earth_rate_n, normal_gravity
 from estimator.nav.frames import LocalFrame
 from estimator.nav.rotation import dcm_from_euler
@@ -508,8 +508,7 @@ def kernel_config(p: Params, frame: LocalFrame, wheel_t: F64) -> F64:
         and p.extensions.gyro_scale_blind_gain
         and not p.extensions.gyro_scale_state
     )
-    gap = float(np.median(np.diff(wheel_t))) if len(wheel_t) > 1 else 0.0
-    cfg[C_WHEEL_GAP] = max(0.5, 5 * gap)
+    cfg[C_WHEEL_GAP] = wheel_gap_s(wheel_t)
     return cfg
 
 

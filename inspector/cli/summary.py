@@ -11,7 +11,7 @@ import numpy as np
 from numpy.typing import NDArray
 
 from estimator.io.routefile import read_route_lines, route_in_frame
-from estimator.log import Log
+from estimator.log import Log, wheel_gap_s
 from estimator.nav.frames import LocalFrame
 from estimator.pipeline.inputs import Inputs, route_distances
 
@@ -22,11 +22,6 @@ ESTIMATED_RATE_NOTE = (
 )
 """The line under the topic table when a rate is only count / span."""
 SMOOTHING_FIXES = 5
-WHEEL_GAP_MIN_S = 0.5
-WHEEL_GAP_INTERVALS = 5.0
-"""wheel samples further apart than both (as the filter, which does not interpolate across
-them) are not integrated across: over a recording paused, or a clock that jumped a day, the
-last speed times the gap is no distance driven"""
 SILENT_S = 5.0
 """every stream silent longer than this (the filter's IMU gap) is named in ``info``"""
 
@@ -109,7 +104,7 @@ def distances_travelled(log: Log, frame: LocalFrame | None) -> tuple[tuple[str, 
     if log.wheel is not None and len(log.wheel.t) > 1:
         w = log.wheel
         dt_w = np.diff(w.t)
-        bridged = dt_w <= max(WHEEL_GAP_MIN_S, WHEEL_GAP_INTERVALS * float(np.median(dt_w)))
+        bridged = dt_w <= wheel_gap_s(w.t)
         step = 0.5 * np.abs(w.speed[1:] + w.speed[:-1]) * dt_w
         skipped = int(np.count_nonzero(~bridged))
         label = "wheel-speed integral"
