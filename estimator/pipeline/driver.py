@@ -88,7 +88,7 @@ from estimator.filter.updates import (
     pseudo_position_update,
     turn_map_bias,
 )
-from estimator.io.plausibility import GRAVITY, in_bulk
+from estimator.io.plausibility import GRAVITY
 from estimator.log import Log
 from estimator.matching import (
     MatchGeometry,
@@ -115,6 +115,7 @@ from estimator.matching.reanchor import gap_bound_m, should_reanchor, within_dri
 from estimator.nav.frames import LocalFrame
 from estimator.nav.rotation import yaw_from_quaternion
 from estimator.params import Method, Params, for_method, matching_params
+from estimator.pipeline.inputs import frame_of
 from estimator.pipeline.reuse import (
     Checkpoint,
     Memo,
@@ -542,13 +543,11 @@ def aided_approach_m(rows: F64, t_a: float, degraded: Sequence[tuple[float, floa
 
 
 def _frame_of(log: Log) -> LocalFrame:
-    """At the first valid fix that agrees with the bulk of them (:func:`in_bulk`)."""
-    g = log.gnss
-    ok = np.flatnonzero(g.valid)
-    if not len(ok):
+    """The session's frame (:func:`~estimator.pipeline.inputs.frame_of`), which the filter
+    places at a fix: a log without one is refused here, not framed at its truth."""
+    if not log.gnss.valid.any():
         raise LogError(log.path, "no valid GNSS fix: the filter cannot be initialised")
-    ok = ok[in_bulk(g.lat[ok], g.lon[ok])]
-    return LocalFrame.at(g.lat[ok], g.lon[ok], g.alt[ok])
+    return frame_of(log)
 
 
 @dataclass
@@ -739,9 +738,8 @@ class Driver:
         reckoned (no route update applied in it), ended beyond its sigmas, add to the run's
         random walk of the horizontal position the least one that would have put that exit
         within the 95 % bound over the time it ran (from the outage's start to the fix it was
-        judged by), and start this outage with it. The
-        previous exit was judged with the walk it had, so the walks add up (to
-        ``noise.exit_walk_max_m2_s`` at most); the fixes after
+        judged by), and start this outage with it. The previous exit was judged with the walk
+        it had, so the walks add up (to ``noise.exit_walk_max_m2_s`` at most); the fixes after
         an outage end the kernel's walk (``A_POS_WALK``), not the run's (``A_EXIT_WALK``,
         carried in the filter's state through checkpoints). A walk of the position alone
         moves no dead-reckoned estimate inside the outage (no other state is correlated with
