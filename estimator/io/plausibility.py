@@ -23,6 +23,7 @@ from numpy.typing import NDArray
 
 from estimator.errors import LogError
 from estimator.log import GnssData, Log
+from estimator.nav.earth import great_circle_m
 from estimator.nav.frames import LocalFrame
 
 F64 = NDArray[np.float64]
@@ -57,7 +58,6 @@ FAR_FIX_SPREADS = 4.0
 """A valid fix farther than both this and this many times the fixes' median distance from
 their median position is not where the vehicle was (a receiver's cold-start 0, 0, a corrupt
 message): at its straight drive's ends a log's fixes are twice their median distance away."""
-EARTH_RADIUS_M = 6_371_000.0
 OTHER_CLOCK_S = 60.0
 """GNSS or wheel samples stamped further than this outside the IMU's span are on another clock
 (or their stream's clock stepped): the filter runs over the IMU's span, so they go unused."""
@@ -124,11 +124,7 @@ def in_bulk(lat: F64, lon: F64) -> NDArray[np.bool_]:
 
 def _from_median_m(lat: F64, lon: F64) -> F64:
     """Great-circle distance of each position from their median latitude and longitude."""
-    phi, lam = np.radians(lat), np.radians(lon)
-    phi0, lam0 = float(np.median(phi)), float(np.median(lam))
-    h = np.sin((phi - phi0) / 2) ** 2 + np.cos(phi) * np.cos(phi0) * np.sin((lam - lam0) / 2) ** 2
-    d: F64 = 2 * EARTH_RADIUS_M * np.arcsin(np.sqrt(np.clip(h, 0.0, 1.0)))
-    return d
+    return great_circle_m(float(np.median(lat)), float(np.median(lon)), lat, lon)
 
 
 def topic_of(log: Log, role: str) -> str:

@@ -27,6 +27,7 @@ from numpy.typing import NDArray
 
 from estimator.errors import RouteError, RouteLineError
 from estimator.io.routeformats import ROUTE_SUFFIXES_TEXT, route_format
+from estimator.nav.earth import great_circle_m
 from estimator.nav.frames import LocalFrame
 from estimator.route import Route
 
@@ -53,8 +54,6 @@ of km is already rare and one over 50 km joins places no road joins directly: Mu
 parts from different regions, a stray point, a route across continents. It would be taken for a
 road (matched against, counted in the route's length), so it is refused, not joined silently.
 Tens of km, not a few: a hand-drawn motorway with a click every 20 km is still a usable route."""
-EARTH_RADIUS_M = 6_371_008.8
-"""Mean Earth radius (IUGG), for the great-circle length of a route's segments."""
 MAX_LISTED_LINES = 12
 """Lines named in a message; the rest are counted."""
 
@@ -164,17 +163,6 @@ def _check_segments(p: Path, chosen: _Candidate, lat: F64, lon: F64) -> None:
         f"{lat[i]:.5f}, {lon[i]:.5f} to {lat[i + 1]:.5f}, {lon[i + 1]:.5f} (lat, lon); a road "
         f"route has points at most {MAX_ROUTE_SEGMENT_M / 1000:g} km apart: two places joined?",
     )
-
-
-def great_circle_m(lat0: F64, lon0: F64, lat1: F64, lon1: F64) -> F64:
-    """Haversine distance, m, on a sphere of :data:`EARTH_RADIUS_M` (within 0.5 % of the
-    ellipsoid's: enough to tell a road's segment from a joined region's)."""
-    phi0, phi1 = np.radians(lat0), np.radians(lat1)
-    half_dphi = (phi1 - phi0) / 2
-    half_dlam = np.radians(lon1 - lon0) / 2
-    h = np.sin(half_dphi) ** 2 + np.cos(phi0) * np.cos(phi1) * np.sin(half_dlam) ** 2
-    distance: F64 = 2 * EARTH_RADIUS_M * np.arcsin(np.sqrt(np.clip(h, 0.0, 1.0)))
-    return distance
 
 
 def load_route(path: str | Path, frame: LocalFrame, *, feature: str | int | None = None) -> Route:
