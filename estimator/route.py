@@ -160,12 +160,20 @@ class Route:
         counts = np.fromiter((len(k) for k in near), np.intp, len(near))
         owner = np.repeat(np.arange(len(p)), counts)
         seg = seg_of[np.fromiter((i for k in near for i in k), np.intp, int(counts.sum()))]
-        rel = p[owner] - self.xy[seg]
-        foot_along = np.clip(np.einsum("nj,nj->n", rel, self.unit[seg]), 0.0, L[seg])
-        gap = rel - foot_along[:, None] * self.unit[seg]
+        _, distance = self.segment_feet(p[owner], seg)
         out = np.full(len(p), np.inf)
-        np.minimum.at(out, owner, np.hypot(gap[:, 0], gap[:, 1]))
+        np.minimum.at(out, owner, distance)
         return out
+
+    def segment_feet(self, points: F64, segments: NDArray[np.intp]) -> tuple[F64, F64]:
+        """For each point and the segment paired with it: how far along the segment its foot
+        lies (m from the segment's start, within the segment) and the point's distance from
+        that foot."""
+        rel = points - self.xy[segments]
+        u = self.unit[segments]
+        along = np.clip(np.einsum("nj,nj->n", rel, u), 0.0, self.seglen[segments])
+        gap = rel - along[:, None] * u
+        return along, np.hypot(gap[:, 0], gap[:, 1])
 
     def project(
         self,

@@ -222,9 +222,8 @@ def _along_the_heading(route: Route, p: F64, heading: F64, s_near: float) -> flo
         return s_near
     if float(route.tangent_at(np.array([s_near]))[0] @ heading) > 0.0:
         return s_near  # drawn the way the vehicle drives: the nearest point is the place
-    along = np.clip(np.einsum("ij,ij->i", p - route.xy[:-1], route.unit), 0.0, route.seglen)
-    foot = route.xy[:-1] + along[:, None] * route.unit
-    distance = np.hypot(*(p - foot).T)
+    segments = np.arange(len(route.seglen))
+    along, distance = route.segment_feet(np.broadcast_to(p, (len(segments), 2)), segments)
     near = distance <= float(distance.min()) + SAME_PLACE_M
     agreement = np.where(near, route.unit @ (heading / speed), -np.inf)
     k = int(np.argmax(agreement))
