@@ -1,13 +1,16 @@
-"""Errors that reach the user as one line: the file (or parameter) and what is wrong with it."""
+"""Errors that reach the user as one line: the file (or parameter) and what is wrong with it;
+and the rule by which a warning of many like it stays a few lines."""
 
 from __future__ import annotations
 
 import abc
-from collections.abc import Iterator
+from collections.abc import Iterator, Sequence
 from contextlib import contextmanager
 from dataclasses import dataclass
 from pathlib import Path
-from typing import Self
+from typing import Self, TypeVar
+
+T = TypeVar("T")
 
 
 class RoutefuseError(Exception):
@@ -154,3 +157,16 @@ def choices_said(where: WhereToChoose) -> Iterator[None]:
         if where == ON_THE_COMMAND_LINE:
             raise
         raise exc.choose(where) from None
+
+
+WARNING_LINES_NAMED = 5
+"""A warning about more items of one kind than this (IMU gaps, outages) names the first
+``WARNING_LINES_NAMED - 1`` and sums the rest up in one line: a log cut into thousands of gaps
+gets a few warning lines, not thousands."""
+
+
+def named_and_summed(items: Sequence[T]) -> tuple[Sequence[T], Sequence[T]]:
+    """The items a warning gives a line each, and the rest its last line sums up: all of them
+    when there are at most :data:`WARNING_LINES_NAMED`, else all but the summary's line."""
+    named = len(items) if len(items) <= WARNING_LINES_NAMED else WARNING_LINES_NAMED - 1
+    return items[:named], items[named:]

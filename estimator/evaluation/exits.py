@@ -23,13 +23,11 @@ from collections.abc import Sequence
 import numpy as np
 from numpy.typing import NDArray
 
+from estimator.errors import named_and_summed
 from estimator.results import Epochs, OutageExit, Run
 
 F64 = NDArray[np.float64]
 
-EXITS_NAMED = 5
-"""warning lines about outages that ended beyond their sigmas: the first four named, the rest in
-one line (a log cut into dozens of outages must not bury its other warnings)"""
 EXIT_SPAN_S = 3.0
 """the fixes accepted within this long of the first are compared (their median): one fix is
 one multipath jump away from a false alarm, and a receiver holds a jump for about a second"""
@@ -138,8 +136,9 @@ def exit_warnings(
     (``routefuse run`` prints every method's warnings together). ``route_updated``: per exit,
     whether route updates were applied in its outage (what went wrong differs)."""
     flagged = [(x, r) for x, r in zip(exits, route_updated, strict=True) if x.overconfident]
+    named, summed = named_and_summed(flagged)
     lines = []
-    for x, routed in flagged[: EXITS_NAMED - 1] if len(flagged) > EXITS_NAMED else flagged:
+    for x, routed in named:
         why = (
             "the route updates pulled it off unnoticed (a map off the road, a wrong match: "
             "check the route and the matches)"
@@ -152,7 +151,7 @@ def exit_warnings(
             f"{math.sqrt(x.chi2):.1f} sigma, where the estimate claimed "
             f"{x.estimate_sigma_m:.1f} m: {why}, or the fixes are worse than they claim"
         )
-    rest = [x for x, _ in flagged[len(lines) :]]
+    rest = [x for x, _ in summed]
     if rest:
         worst = max(rest, key=lambda x: x.chi2)
         lines.append(

@@ -12,7 +12,7 @@ from dataclasses import dataclass
 import numpy as np
 from numpy.typing import NDArray
 
-from estimator.errors import LogError
+from estimator.errors import LogError, named_and_summed
 from estimator.filter.alignment import DEG_H, MG, align
 from estimator.filter.kernel import IMU_GAP_S, wheel_distance
 from estimator.filter.layout import (
@@ -270,12 +270,6 @@ def _realignments(
     return tuple(found)
 
 
-IMU_GAPS_NAMED = 5
-"""A log with more IMU gaps than this names the first ``IMU_GAPS_NAMED - 1`` and sums the
-rest up in one line: a log cut into thousands of gaps gets a few warning lines, not
-thousands."""
-
-
 def imu_gap_warnings(
     start: F64,
     end: F64,
@@ -288,10 +282,10 @@ def imu_gap_warnings(
     """One line per IMU gap (``start``-``end``, s after the log start): how the position was
     carried across it, the fixes inside it left out, and whether the filter was aligned
     afresh after it (at ``realigned``, s) or its heading carried across is left to the fixes
-    after it. Beyond :data:`IMU_GAPS_NAMED` gaps, the rest are summed up in one line (their
-    span, their total length, the fixes left out, how many were re-aligned). ``wheels_silent``:
-    the gaps the log's wheels fell silent in too (a paused recording), where the position is
-    held (:func:`~estimator.filter.kernel._bridge`)."""
+    after it. Beyond :data:`~estimator.errors.WARNING_LINES_NAMED` gaps, the rest are summed up
+    in one line (their span, their total length, the fixes left out, how many were
+    re-aligned). ``wheels_silent``: the gaps the log's wheels fell silent in too (a paused
+    recording), where the position is held (:func:`~estimator.filter.kernel._bridge`)."""
     bridge = (
         "carried along the wheel speed"
         if have_wheel
@@ -300,9 +294,9 @@ def imu_gap_warnings(
     held = "held (the wheels silent in it too: a paused recording?)"
     silent = wheels_silent if have_wheel else ()
     n = len(start)
-    named = n if n <= IMU_GAPS_NAMED else IMU_GAPS_NAMED - 1
+    gaps, summed = named_and_summed(range(n))
     lines = []
-    for i in range(named):
+    for i in gaps:
         at = realigned[i]
         done = (
             f"re-aligned from the GNSS track at {at:.1f} s"
@@ -315,17 +309,18 @@ def imu_gap_warnings(
             f"{held if i < len(silent) and silent[i] else bridge}; {int(left_out[i])} fixes "
             f"inside it not used; {done}"
         )
-    if named < n:
-        rest = slice(named, n)
+    if summed:
+        first = summed[0]
+        rest = slice(first, n)
         total = float(np.sum(end[rest] - start[rest]))
         again = sum(at is not None for at in realigned[rest])
-        n_held = sum(silent[named:])
+        n_held = sum(silent[first:])
         how = bridge if not n_held else f"{bridge} or, in {n_held} of them, {held}"
         lines.append(
-            f"... and {n - named} more IMU gaps between {start[named]:.1f} and {end[-1]:.1f} s "
+            f"... and {n - first} more IMU gaps between {start[first]:.1f} and {end[-1]:.1f} s "
             f"({total:.1f} s in all, the position {how}; {int(np.sum(left_out[rest]))} fixes "
             f"inside them not used; {again} re-aligned from the GNSS track, "
-            f"{n - named - again} not)"
+            f"{n - first - again} not)"
         )
     return lines
 

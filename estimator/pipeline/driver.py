@@ -28,7 +28,7 @@ from typing import Literal
 import numpy as np
 from numpy.typing import NDArray
 
-from estimator.errors import LogError, RoutefuseError
+from estimator.errors import LogError, RoutefuseError, named_and_summed
 from estimator.evaluation.exits import exit_warnings, outage_exits
 from estimator.evaluation.metrics import NEES_95_2DOF, interval_mask
 from estimator.filter.alignment import MG
@@ -72,7 +72,6 @@ from estimator.filter.portal import advance_to_outage
 from estimator.filter.propagation import flush_covariance
 from estimator.filter.route_update import applied_obs_cov, apply_route_match, turn_about_up
 from estimator.filter.setup import (
-    IMU_GAPS_NAMED,
     FilterInputs,
     fix_wander_var,
     prepare_inputs,
@@ -293,7 +292,6 @@ def separation_warnings(
 
 REFUSED_OUTAGE_MIN_ATTEMPTS = 5
 """an outage with this many match attempts, every one refused, is named in a warning"""
-REFUSED_OUTAGES_NAMED = 4
 
 
 def refused_outage_warnings(
@@ -318,11 +316,11 @@ def refused_outage_warnings(
             f"({', '.join(f'{g} {n}' for g, n in gates.most_common())}): it was dead-reckoned "
             "there; check that the route is the road driven, drawn the way it was driven"
         )
-    if len(lines) > REFUSED_OUTAGES_NAMED + 1:
-        more = len(lines) - REFUSED_OUTAGES_NAMED
-        summary = f"{method} run: ... and {more} more outages whose match attempts were all refused"
-        lines = [*lines[:REFUSED_OUTAGES_NAMED], summary]
-    return tuple(lines)
+    named, summed = named_and_summed(lines)
+    if summed:
+        more = f"... and {len(summed)} more outages whose match attempts were all refused"
+        return (*named, f"{method} run: {more}")
+    return tuple(named)
 
 
 def reacquire_warnings(records: Sequence[MatchRecord], t_start: float) -> tuple[str, ...]:
@@ -346,18 +344,16 @@ def reacquire_warnings(records: Sequence[MatchRecord], t_start: float) -> tuple[
 
 def gap_bridge_warnings(records: Sequence[MatchRecord], t_start: float) -> tuple[str, ...]:
     """One line per IMU gap bridged along the route (``extensions.gap_route_bridge``); beyond
-    :data:`~estimator.filter.setup.IMU_GAPS_NAMED` of them the rest are summed up in one line,
+    :data:`~estimator.errors.WARNING_LINES_NAMED` of them the rest are summed up in one line,
     as the gaps' own lines are."""
-    bridged = [r.extra for r in records if "gap_bridge_end_s" in r.extra]
-    named = len(bridged) if len(bridged) <= IMU_GAPS_NAMED else IMU_GAPS_NAMED - 1
+    named, rest = named_and_summed([r.extra for r in records if "gap_bridge_end_s" in r.extra])
     lines = [
         f"IMU gap that ended at {e['gap_bridge_end_s']:.1f} s bridged along the route there: "
         f"the wheels' {e['gap_bridge_along_m']:.0f} m along the road moved the position "
         f"{e['gap_bridge_moved_m']:.1f} m from the straight line the gap left it on and "
         f"turned its heading {e['gap_bridge_turn_deg']:+.1f} deg to the road's"
-        for e in bridged[:named]
+        for e in named
     ]
-    rest = bridged[named:]
     if rest:
         lines.append(
             f"... and {len(rest)} more IMU gaps bridged along the route, ending between "

@@ -10,6 +10,7 @@ import numpy as np
 import pytest
 from numpy.typing import NDArray
 
+from estimator.errors import WARNING_LINES_NAMED
 from estimator.evaluation.metrics import deviation_series, method_metrics
 from estimator.filter.kernel import (
     GAP_TILT_VAR,
@@ -20,11 +21,7 @@ from estimator.filter.kernel import (
     wheel_distance,
 )
 from estimator.filter.layout import A_DIST, A_TIME, E_ATT, NA, NE, NX, X_POS, X_QUAT, X_SCALE, X_VEL
-from estimator.filter.setup import (
-    IMU_GAPS_NAMED,
-    REALIGN_WITHIN_S,
-    imu_gap_warnings,
-)
+from estimator.filter.setup import REALIGN_WITHIN_S, imu_gap_warnings
 from estimator.params import Params
 from estimator.pipeline import open_inputs, run_methods
 from estimator.pipeline.inputs import Inputs
@@ -129,24 +126,24 @@ def test_a_log_cut_into_many_gaps_gets_a_few_warning_lines(long_tunnel: Inputs) 
     run = runs["baseline"]
     named = [w for w in run.warnings if w.startswith("IMU gap ")]
     (rest,) = [w for w in run.warnings if "more IMU gaps" in w]
-    assert len(named) == IMU_GAPS_NAMED - 1
-    assert len(run.warnings) <= IMU_GAPS_NAMED + 3
+    assert len(named) == WARNING_LINES_NAMED - 1
+    assert len(run.warnings) <= WARNING_LINES_NAMED + 3
     assert all("fixes inside it not used; " in w and "re-aligned" in w for w in named)
     first = cut.t[gap_starts[0]] - t0, cut.t[gap_starts[0] + 1] - t0
     assert named[0].startswith(f"IMU gap {first[0]:.1f}-{first[1]:.1f} s: ")
-    later = slice(IMU_GAPS_NAMED - 1, n)
+    later = slice(WARNING_LINES_NAMED - 1, n)
     total = float(np.sum(cut.t[gap_starts[later] + 1] - cut.t[gap_starts[later]]))
     last_end = cut.t[gap_starts[-1] + 1] - t0
-    assert rest.startswith(f"... and {n - IMU_GAPS_NAMED + 1} more IMU gaps between ")
+    assert rest.startswith(f"... and {n - WARNING_LINES_NAMED + 1} more IMU gaps between ")
     assert f" and {last_end:.1f} s ({total:.1f} s in all, " in rest
     realigned = int(rest.split("not used; ")[1].split(" re-aligned")[0])
     not_realigned = int(rest.split("GNSS track, ")[1].split(" not)")[0])
     assert realigned > 0 and not_realigned > 0  # open sky and tunnel
-    assert realigned + not_realigned == n - IMU_GAPS_NAMED + 1
+    assert realigned + not_realigned == n - WARNING_LINES_NAMED + 1
     # in the tunnel routefuse bridges gap after gap along the route, each bridge placing the
     # vehicle on it for the next, and says so in a few lines too
     bridged = [w for w in runs["proposed"].warnings if "bridged along the route" in w]
-    assert len(bridged) == IMU_GAPS_NAMED
+    assert len(bridged) == WARNING_LINES_NAMED
     assert bridged[-1].startswith("... and ")
     assert gapped.route is not None
     rmse = {
@@ -156,22 +153,22 @@ def test_a_log_cut_into_many_gaps_gets_a_few_warning_lines(long_tunnel: Inputs) 
     assert rmse["proposed"] < 0.1 * rmse["baseline"]
 
 
-@pytest.mark.parametrize("n", [1, IMU_GAPS_NAMED, IMU_GAPS_NAMED + 1, 5000])
+@pytest.mark.parametrize("n", [1, WARNING_LINES_NAMED, WARNING_LINES_NAMED + 1, 5000])
 def test_gap_lines_are_bounded_whatever_the_count(n: int) -> None:
     start = 10.0 + 20.0 * np.arange(n)
     end = start + 6.0 + (np.arange(n) % 3)
     realigned = tuple(None if i % 4 == 3 else float(end[i] + 0.5) for i in range(n))
     left_out = np.full(n, 30, np.intp)
     lines = imu_gap_warnings(start, end, left_out, realigned, have_wheel=False)
-    assert len(lines) == min(n, IMU_GAPS_NAMED)
+    assert len(lines) == min(n, WARNING_LINES_NAMED)
     assert max(map(len, lines)) <= MAX_WARNING_CHARS  # the inspector shows them whole
-    named = lines if n <= IMU_GAPS_NAMED else lines[:-1]
+    named = lines if n <= WARNING_LINES_NAMED else lines[:-1]
     for i, line in enumerate(named):
         assert line.startswith(f"IMU gap {start[i]:.1f}-{end[i]:.1f} s: ")
         assert "carried along the last velocity (no wheel speed; " in line
         assert "; 30 fixes inside it not used; " in line
         assert ("not re-aligned" in line) == (realigned[i] is None)
-    if n > IMU_GAPS_NAMED:
+    if n > WARNING_LINES_NAMED:
         k = len(named)
         again = sum(r is not None for r in realigned[k:])
         assert lines[-1] == (
@@ -186,7 +183,7 @@ def test_gap_lines_are_bounded_whatever_the_count(n: int) -> None:
 def test_a_gap_the_wheels_fell_silent_in_too_is_named_held() -> None:
     """The kernel carries the position by the wheels only where their samples cover the gap;
     where they fell silent too (a paused recording) it holds it, and the line says so."""
-    n = IMU_GAPS_NAMED + 3
+    n = WARNING_LINES_NAMED + 3
     start = 10.0 + 20.0 * np.arange(n)
     end = start + 6.0
     silent = tuple(i % 2 == 1 for i in range(n))
@@ -195,7 +192,7 @@ def test_a_gap_the_wheels_fell_silent_in_too_is_named_held() -> None:
     )
     assert "the position carried along the wheel speed;" in lines[0]
     assert "the position held (the wheels silent in it too: a paused recording?);" in lines[1]
-    rest = sum(silent[IMU_GAPS_NAMED - 1 :])
+    rest = sum(silent[WARNING_LINES_NAMED - 1 :])
     assert f"or, in {rest} of them, held (the wheels silent" in lines[-1]
 
 

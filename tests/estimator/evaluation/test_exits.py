@@ -113,7 +113,8 @@ def test_fixes_after_the_next_outage_do_not_judge_this_one() -> None:
 
 
 def test_dozens_of_flagged_outages_are_a_few_lines() -> None:
-    from estimator.evaluation.exits import EXITS_NAMED, exit_warnings
+    from estimator.errors import WARNING_LINES_NAMED
+    from estimator.evaluation.exits import exit_warnings
 
     ep = drive(10.0, 1.0)
     (x,) = outage_exits(ep, [OUTAGE], *fixes(), (0.0, 0.0, 0.0))
@@ -121,7 +122,7 @@ def test_dozens_of_flagged_outages_are_a_few_lines() -> None:
     worst = dataclasses.replace(many[9], error=np.array([0.0, 30.0]))
     many[9] = worst
     lines = exit_warnings("baseline", many, [False] * 12, T0)
-    assert len(lines) == EXITS_NAMED
+    assert len(lines) == WARNING_LINES_NAMED
     assert all(w.startswith("baseline run: the outage at ") for w in lines[:-1])
     assert "dead reckoning drifted beyond its noise model" in lines[0]
     assert lines[-1].startswith("... and 8 more outages of the baseline run, between 130.0 ")

@@ -178,7 +178,7 @@ def test_many_bridged_gaps_get_a_few_warning_lines() -> None:
     """As the gaps' own lines: the first four named, the rest summed up in one line."""
     from types import SimpleNamespace
 
-    from estimator.filter.setup import IMU_GAPS_NAMED
+    from estimator.errors import WARNING_LINES_NAMED
     from estimator.pipeline.driver import gap_bridge_warnings
 
     def bridged(end: float, moved: float, turn: float) -> SimpleNamespace:
@@ -192,14 +192,14 @@ def test_many_bridged_gaps_get_a_few_warning_lines() -> None:
 
     records = [bridged(10.0 + 7 * k, 0.5 + k, (-1) ** k * 0.1 * k) for k in range(60)]
     lines = gap_bridge_warnings(records, 0.0)  # type: ignore[arg-type]
-    assert len(lines) == IMU_GAPS_NAMED
+    assert len(lines) == WARNING_LINES_NAMED
     assert lines[0].startswith("IMU gap that ended at 10.0 s bridged along the route there: ")
     assert lines[-1] == (
         "... and 56 more IMU gaps bridged along the route, ending between 38.0 and 423.0 s (the "
         "position moved 59.5 m at most, the heading turned 5.9 deg at most)"
     )
-    few = gap_bridge_warnings(records[:IMU_GAPS_NAMED], 0.0)  # type: ignore[arg-type]
-    assert len(few) == IMU_GAPS_NAMED and not any("more IMU gaps" in w for w in few)
+    few = gap_bridge_warnings(records[:WARNING_LINES_NAMED], 0.0)  # type: ignore[arg-type]
+    assert len(few) == WARNING_LINES_NAMED and not any("more IMU gaps" in w for w in few)
 
 
 def test_a_gap_before_any_attempt_is_bridged_only_on_the_road_the_approach_found() -> None:
