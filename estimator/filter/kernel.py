@@ -27,6 +27,7 @@ from estimator.filter.layout import (
     A_PREV_ACCEL,
     A_PREV_GYRO,
     A_TIME,
+    A_WALK_FROM,
     C_AID_DT,
     C_COV_DT,
     C_GRAVITY,
@@ -212,7 +213,8 @@ def run_until(
             )
             if used:
                 aux[A_GNSS_USED] = 1.0
-                aux[A_POS_WALK] = 0.0
+                if gnss_t[g] > aux[A_WALK_FROM]:
+                    aux[A_POS_WALK] = 0.0
         idx[I_IMU] = k + 1
         if t >= aux[A_NEXT_OUT]:
             if not finite_state(x, P):

@@ -74,8 +74,10 @@ A_ROT_SHIFT = 48  # (2) with it, the map's shift at the origin: sum of -dr J a (
 A_COV_W = 50  # (3) integral of C_bn e_z w_z dt (body z rate) over the pending propagation
 A_POS_WALK = 53  # (m^2/s) a random walk of the horizontal position in an outage: the drift the
 # exit check found beyond the model in earlier ones (extensions.exit_adapt), 0 at the next fix used
+# stamped after A_WALK_FROM
 A_EXIT_WALK = 54  # what A_POS_WALK is set to at an outage's start: the exits so far, summed
-NA = 55
+A_WALK_FROM = 55  # the outage's start, its last fix: that fix, pending when it is set, keeps it
+NA = 56
 
 # idx
 I_IMU, I_WHEEL, I_GNSS, I_OUT, NI = 0, 1, 2, 3, 4

@@ -47,6 +47,7 @@ from estimator.filter.layout import (
     A_ROUTE,
     A_TIME,
     A_USED_DIST,
+    A_WALK_FROM,
     E_ATT,
     E_BA,
     E_GSF,
@@ -761,6 +762,7 @@ class Driver:
                     walk = f.aux[A_EXIT_WALK] + excess / max(x.fix_t[0] - x.start, 1.0)
                     f.aux[A_EXIT_WALK] = min(walk, self.p.noise.exit_walk_max_m2_s)
         f.aux[A_POS_WALK] = f.aux[A_EXIT_WALK]
+        f.aux[A_WALK_FROM] = self.inp.degraded[i][0]
 
     def _release_turn(self, i: int, a: float, b: float) -> None:
         """At the end of outage ``i`` (``a`` to ``b``), give the navigation state back the

@@ -344,3 +344,30 @@ def test_perfect_sensors_stay_on_truth(seed):
     heading = np.interp(e.t, log.truth.t, np.unwrap(log.truth.heading))
     yaw_err = np.angle(np.exp(1j * (e.attitude[:, 2] - heading)))[inside]
     assert np.degrees(np.abs(yaw_err)).max() < 0.05
+
+
+def test_the_outage_s_own_last_fix_does_not_end_its_walk():
+    """An outage starts at its last fix, which lies between IMU samples on a real receiver
+    and so is applied after the driver set the outage's walk (``extensions.exit_adapt``):
+    that fix leaves the walk on; the next fix after it ends it. (The last fix ended it: on the
+    Husky log with six 20 s outages the walk lasted one IMU step.)"""
+    log, _, _ = drive(
+        duration=40.0, gyro_noise=1e-3, accel_noise=0.02, gnss_sigma=0.5, wheel_sigma=0.05
+    )
+    inp = prepare_inputs(log, Params(), FRAME, ())
+    k = int(np.searchsorted(inp.gnss_t, inp.gnss_t[0] + 20.0))
+    t_a = float(inp.gnss_t[k])
+    assert not np.isin(t_a, inp.imu_t)
+    f = _started(inp, log, 1000)
+    f.advance(t_a)
+    assert f.idx[layout.I_GNSS] == k  # the outage's last fix is still to be applied
+    ahead = f.snapshot()
+    for walk_from, kept in ((t_a, 2.5), (t_a - 1.0, 0.0)):
+        f.set_state(ahead)
+        f.aux[layout.A_POS_WALK] = 2.5
+        f.aux[layout.A_WALK_FROM] = walk_from
+        f.advance(0.5 * (t_a + float(inp.gnss_t[k + 1])))
+        assert f.idx[layout.I_GNSS] == k + 1
+        assert f.aux[layout.A_POS_WALK] == kept
+    f.advance(float(inp.gnss_t[k + 1]) + 1e-3)
+    assert f.aux[layout.A_POS_WALK] == 0.0
