@@ -22,7 +22,7 @@ import numpy as np
 from numpy.typing import NDArray
 
 from estimator.errors import LogError
-from estimator.log import GnssData, Log
+from estimator.log import GnssData, Log, wheel_gap_s
 from estimator.nav.earth import great_circle_m
 from estimator.nav.frames import LocalFrame
 
@@ -61,6 +61,35 @@ message): at its straight drive's ends a log's fixes are twice their median dist
 OTHER_CLOCK_S = 60.0
 """GNSS or wheel samples stamped further than this outside the IMU's span are on another clock
 (or their stream's clock stepped): the filter runs over the IMU's span, so they go unused."""
+CLOCK_STEP_GAP_S = 2.0
+CLOCK_STEP_GAP_INTERVALS = 3
+"""Valid fixes further apart than both (seconds, median fix intervals) bracket a gap: where a
+step of the GNSS clock shows, the stamps leaping while the fixes ran on (or back, into an
+outage). Nearer fixes are a receiver's ordinary rate."""
+MAX_CLOCK_STEP_GAP_S = 2 * OTHER_CLOCK_S
+"""Longer gaps are not judged: over minutes the wheels' scale error and the gyro's drift put
+the dead-reckoned track hundreds of metres off, as far as a step of a few seconds would."""
+MIN_CLOCK_STEP_S = 2.0
+"""A smaller step is within a 1 Hz receiver's stamp resolution and the fixes' noise at town
+speeds, and is not named."""
+CLOCK_STEP_WINDOW_S = 5.0
+CLOCK_STEP_PAIRS = 8
+"""Up to this many fixes from this long before a gap and after it are compared, each pair's
+distance against the dead-reckoned one: a few seconds of track each side, so that the
+dead-reckoning over the pairs is mostly the gap's."""
+CLOCK_STEP_SHIFT_S = 0.1
+"""the resolution of the step's size"""
+CLOCK_STEP_NOISE_M = 8.0
+CLOCK_STEP_DRIFT = 0.05
+"""A fix pair's distance agrees with the dead-reckoned one within this (m) plus this fraction
+of the distance driven: the fixes' metres of noise and re-acquisition jumps, a wheel scale off
+by 2 % and the chord of a track bent by a drifting gyro."""
+CLOCK_STEP_DISAGREE = 2.0
+"""At their stamps the fixes after a step disagree with the wheels and the gyro by more than
+this many tolerances (the median over the pairs); shifted by the step, they agree within one."""
+MAX_IMU_GAP_IN_STEP_S = 1.0
+"""A gap judged needs the IMU without a hole of more than this (s) around it: no dead-reckoning
+is made across one."""
 MIN_IMU_INTERVAL_S = 1e-4
 """A median IMU interval below this (over 10 kHz; vehicle IMUs run at up to a few hundred
 Hz) is stamps on another time scale: a 75 s drive squeezed into milliseconds."""
@@ -103,6 +132,7 @@ def checked(path: Path, log: Log) -> Log:
         _gyro(path, log, motion, warnings)
         if log.wheel is not None and not _wheel_plausible(log, motion, warnings):
             log = dataclasses.replace(log, wheel=None)
+    log = dataclasses.replace(log, gnss=_clock_step(path, log, warnings))
     if not warnings:
         return log
     return dataclasses.replace(log, warnings=(*log.warnings, *warnings))
@@ -223,6 +253,146 @@ def _off_clock(path: Path, log: Log, role: str, t: F64, out: NDArray[np.bool_], 
         f"{stamped}, more than {OTHER_CLOCK_S:g} s outside the IMU's 0.0-"
         f"{log.t_end - log.t_start:.1f} s (another clock, or a step of it): {what}"
     )
+
+
+@dataclasses.dataclass(frozen=True)
+class _DeadReckoning:
+    """The track the wheel speed and the yaw rate draw over a stretch of the IMU's span: its
+    shape only (it starts at 0, 0, heading along x), which distances between its points
+    compare with the distances between fixes whatever the heading."""
+
+    t: F64
+    xy: F64
+    """(N, 2) m"""
+    driven: F64
+    """(N,) distance driven since the start, m"""
+
+    @classmethod
+    def over(cls, log: Log, t0: float, t1: float) -> _DeadReckoning | None:
+        """The track over ``t0``-``t1`` (cut to the IMU's and the wheels' spans); None without
+        wheels, or with a hole in either stream there."""
+        w, imu = log.wheel, log.imu
+        if w is None or len(w.t) < 2:
+            return None
+        t0, t1 = max(t0, float(w.t[0]), log.t_start), min(t1, float(w.t[-1]), log.t_end)
+        k = slice(int(np.searchsorted(imu.t, t0)), int(np.searchsorted(imu.t, t1, "right")))
+        t = imu.t[k]
+        wk = slice(int(np.searchsorted(w.t, t0)), int(np.searchsorted(w.t, t1, "right")))
+        if len(t) < 2 or np.max(np.diff(t)) > MAX_IMU_GAP_IN_STEP_S:
+            return None
+        if np.max(np.diff(w.t[wk]), initial=0.0) > wheel_gap_s(w.t):
+            return None
+        up = np.mean(imu.accel[k], axis=0)
+        yaw_rate = imu.gyro[k] @ (up / max(float(np.linalg.norm(up)), 1e-9))
+        dt = np.diff(t)
+        heading = np.r_[0.0, np.cumsum(0.5 * (yaw_rate[1:] + yaw_rate[:-1]) * dt)]
+        speed = np.interp(t, w.t, w.speed)
+        step = 0.5 * (speed[1:] + speed[:-1]) * dt
+        mid = 0.5 * (heading[1:] + heading[:-1])
+        xy = np.vstack([np.zeros((1, 2)), np.cumsum(step[:, None] * _unit(mid), axis=0)])
+        return cls(t, xy, np.r_[0.0, np.cumsum(np.abs(step))])
+
+    def at(self, t: F64) -> tuple[F64, F64, NDArray[np.bool_]]:
+        """Position (..., 2), distance driven and whether inside the track's span, at ``t``."""
+        xy = np.stack([np.interp(t, self.t, self.xy[:, i]) for i in (0, 1)], axis=-1)
+        inside: NDArray[np.bool_] = (t >= self.t[0]) & (t <= self.t[-1])
+        return xy, np.interp(t, self.t, self.driven), inside
+
+
+def _unit(angle: F64) -> F64:
+    out: F64 = np.column_stack([np.cos(angle), np.sin(angle)])
+    return out
+
+
+def _clock_step(path: Path, log: Log, warnings: list[str]) -> GnssData:
+    """The fixes with those after a step of the GNSS clock (under :data:`OTHER_CLOCK_S`:
+    larger ones leave the fixes outside the IMU's span, :func:`_on_the_imu_clock`) made no
+    fix, named in one line. A step shows at a gap between fixes (the stamps leaping forward
+    while the fixes ran on, or back into an outage): the distances from the fixes before it to
+    those after it are not those the wheels and the gyro say were driven between their stamps,
+    and they are once the fixes after it are moved by the step. Without this the filter took
+    every fix after a 20 s step at the wrong time, 300 m off, or a fake outage, in silence.
+    The fixes are left out rather than moved back: the step is measured to a tenth of a second
+    against a dead-reckoning, whose error would go into every fix moved."""
+    g = log.gnss
+    ok = np.flatnonzero(g.valid)
+    if log.wheel is None or len(ok) < 2:
+        return g
+    t = g.t[ok]
+    dt = np.diff(t)
+    gap = max(CLOCK_STEP_GAP_S, CLOCK_STEP_GAP_INTERVALS * float(np.median(dt)))
+    gaps = np.flatnonzero((dt > gap) & (dt <= MAX_CLOCK_STEP_GAP_S))
+    if not len(gaps):
+        return g
+    xy = LocalFrame.at(g.lat[ok], g.lon[ok], g.alt[ok]).to_enu(g.lat[ok], g.lon[ok])[:, :2]
+    for a in gaps:
+        shift = _step_at(log, t, xy, int(a))
+        if shift is None:
+            continue
+        rel = g.t - log.t_start
+        after = ok[a + 1 :]
+        direction = "forward" if shift > 0 else "back"
+        warnings.append(
+            f"{path.name}: GNSS {topic_of(log, 'gnss')}: its clock steps {abs(shift):.1f} s "
+            f"{direction} after {rel[ok[a]]:.1f} s (the fixes after it lie where the wheels and "
+            f"the gyro put the vehicle {abs(shift):.1f} s {'before' if shift > 0 else 'after'} "
+            f"their stamps); the {len(after)} fixes stamped {rel[after[0]]:.1f}-"
+            f"{rel[after[-1]]:.1f} s are left out of the run"
+        )
+        status = g.status.copy()
+        status[after] = -1
+        return dataclasses.replace(g, status=status)
+    return g
+
+
+def _step_at(log: Log, t: F64, xy: F64, a: int) -> float | None:
+    """The step of the GNSS clock (s, + forward) across the gap after valid fix ``a``
+    (stamps ``t``, positions ``xy``), or None when the fixes agree with the wheels and the
+    gyro at their stamps, or no step makes them agree."""
+    before = np.flatnonzero((t <= t[a]) & (t >= t[a] - CLOCK_STEP_WINDOW_S))
+    after = np.flatnonzero((t > t[a]) & (t <= t[a + 1] + CLOCK_STEP_WINDOW_S))
+    i = before[np.linspace(0, len(before) - 1, min(len(before), CLOCK_STEP_PAIRS)).astype(int)]
+    j = after[np.linspace(0, len(after) - 1, min(len(after), CLOCK_STEP_PAIRS)).astype(int)]
+    dr = _DeadReckoning.over(log, float(t[i[0]]), float(t[j[-1]]) + OTHER_CLOCK_S)
+    if dr is None:
+        return None
+    n = round(OTHER_CLOCK_S / CLOCK_STEP_SHIFT_S)
+    if _step_misfit(dr, t, xy, a, i, j, np.zeros(1))[0] <= CLOCK_STEP_DISAGREE:
+        return None
+    steps = CLOCK_STEP_SHIFT_S * np.arange(-n, n + 1, dtype=np.float64)
+    score = _step_misfit(dr, t, xy, a, i, j, steps)
+    best = int(np.argmin(score))
+    shift = float(steps[best])
+    if score[best] <= 1.0 and abs(shift) >= MIN_CLOCK_STEP_S:
+        return shift
+    return None
+
+
+def _step_misfit(
+    dr: _DeadReckoning,
+    t: F64,
+    xy: F64,
+    a: int,
+    i: NDArray[np.intp],
+    j: NDArray[np.intp],
+    steps: F64,
+) -> F64:
+    """For each trial step: the median over the pairs of fixes ``i`` (before the gap after fix
+    ``a``) and ``j`` (after it, taken ``step`` before their stamps) of their distance's misfit
+    to the dead-reckoned one, in tolerances; inf where fewer than 3 pairs lie in the track."""
+    apart = np.linalg.norm(xy[j][None, :, :] - xy[i][:, None, :], axis=-1)  # (I, J)
+    p_i, d_i, in_i = dr.at(t[i])
+    taken = t[j][None, :] - steps[:, None]  # (M, J)
+    p_j, d_j, in_j = dr.at(taken)
+    driven_apart = np.linalg.norm(p_j[:, None, :, :] - p_i[None, :, None, :], axis=-1)
+    tolerance = CLOCK_STEP_NOISE_M + CLOCK_STEP_DRIFT * np.abs(d_j[:, None, :] - d_i[None, :, None])
+    usable = (in_j & (taken > t[a]))[:, None, :] & in_i[None, :, None]
+    misfit = np.where(usable, np.abs(driven_apart - apart[None]) / tolerance, np.inf)
+    count = np.count_nonzero(usable.reshape(len(steps), -1), axis=1)
+    ordered = np.sort(misfit.reshape(len(steps), -1), axis=1)
+    median = ordered[np.arange(len(steps)), np.maximum(count - 1, 0) // 2]
+    out: F64 = np.where(count >= 3, median, np.inf)
+    return out
 
 
 def _span(log: Log, t: F64) -> str:
