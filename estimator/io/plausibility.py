@@ -475,6 +475,11 @@ def _span(log: Log, t: F64) -> str:
 
 
 def _imu_alive(path: Path, log: Log, warnings: list[str]) -> None:
+    """Refuse an IMU without accelerations (nothing to dead-reckon with); name a gyro, or an
+    axis, that reads exactly zero throughout. A ROS driver that does not fill
+    ``angular_velocity`` (its covariance -1) publishes zeros: the heading then follows only
+    the fixes, an outage is dead-reckoned straight on, and the run's own warnings (few fixes
+    used, every match refused, a huge accelerometer bias) never said why."""
     v = np.hstack([log.imu.gyro, log.imu.accel])
     if not np.any(v):
         raise LogError(path, "IMU: every sample is zero (a dead or unconnected sensor)")
@@ -482,6 +487,30 @@ def _imu_alive(path: Path, log: Log, warnings: list[str]) -> None:
         warnings.append(
             "IMU: every sample is the same, without any noise (a frozen sensor, or simulated)"
         )
+        return
+    topic = topic_of(log, "imu")
+    if not np.any(log.imu.accel):
+        raise LogError(
+            path,
+            f"IMU {topic}: every linear_acceleration sample is zero (a driver that does not "
+            "fill it, or a dead accelerometer): nothing to dead-reckon with",
+        )
+    dead = ~np.any(v, axis=0)
+    if dead[:3].all():
+        warnings.append(
+            f"{path.name}: IMU {topic}: every angular_velocity sample is zero (a driver that "
+            "does not fill it, or a dead gyro): the heading follows only the fixes, and an "
+            "outage is dead-reckoned straight on"
+        )
+    elif dead.any():
+        axes = ", ".join(f"{kind} {axis}" for k, (kind, axis) in enumerate(_IMU_AXES) if dead[k])
+        warnings.append(
+            f"{path.name}: IMU {topic}: every sample of its {axes} axis is zero (a dead axis, "
+            "or a driver that does not fill it): the estimate is wrong wherever that axis moves"
+        )
+
+
+_IMU_AXES = tuple((kind, axis) for kind in ("gyro", "accelerometer") for axis in "xyz")
 
 
 def _gravity(path: Path, log: Log, warnings: list[str]) -> None:
