@@ -20,11 +20,12 @@ import numpy as np
 from estimator.io.topics import TopicChoice
 from estimator.log import GnssData, ImuData, Log, TopicInfo, TruthData, WheelData
 
-CACHE_VERSION = 10
+CACHE_VERSION = 11
 """5: logs whose IMU and GNSS share no time are refused (they were cached as decoded); 7: a
 warning naming the log's file is stored without the name (:func:`_stored_warning`); 8: fixes
 far from the bulk of a log's are left out, streams on another clock than the IMU's named; 10:
-the fixes after a step of the GNSS clock under a minute are left out"""
+the fixes after a step of the GNSS clock under a minute are left out; 11: an offset of the GNSS
+clock against the IMU's is measured up to a minute (it was up to 1 s)"""
 CACHE_MAX_BYTES = 2_000_000_000
 """Least recently used cache entries are removed beyond this total size."""
 
