@@ -44,10 +44,21 @@ TURN_STEPS = 5
 """course changes are taken over this many ~1 s steps"""
 DEG_S_RATIO = (20.0, 120.0)
 """gyro yaw rate / GNSS course rate in this range: the rates are in deg/s (57.3)"""
-MAX_LAG_S = 1.0
-LAG_STEP_S = 0.02
 LAG_WARN_S = 0.2
 MIN_LAG_CORRELATION = 0.7
+LAG_COARSE_STEP_S = 0.25
+"""The offset between the IMU's and the GNSS clocks is searched on this grid first: a turn is
+seen over ~5 s windows, whose correlation with the gyro's falls by under 0.01 in a quarter of a
+second, so the grid cannot step over a match."""
+LAG_STEP_S = 0.02
+"""then on this one, over a coarse step either side of the best coarse shift"""
+LAG_PEAK_WINDOW_S = 10.0
+LAG_PEAK_MARGIN = 0.05
+"""A measured offset is a clear peak: its correlation beats every one further than the window
+from it by the margin. Shifts within the window still overlap the peak's turns (0.8 at 4 s on
+the samples); beyond it, another match beating the peak by less is another place on a route
+that repeats itself (laps, a slalom), and the offset cannot be told. The samples' peaks beat
+their rivals by 0.10-0.34."""
 WHEEL_UNITS = {"km/h": (3.3, 3.9), "mph": (2.1, 2.4), "the wrong sign": (-1.3, -0.7)}
 WHEEL_RATIO_OK = (0.8, 1.25)
 MIN_WHEEL_PAIRS = 20
@@ -61,6 +72,13 @@ message): at its straight drive's ends a log's fixes are twice their median dist
 OTHER_CLOCK_S = 60.0
 """GNSS or wheel samples stamped further than this outside the IMU's span are on another clock
 (or their stream's clock stepped): the filter runs over the IMU's span, so they go unused."""
+MAX_LAG_S = OTHER_CLOCK_S
+"""Offsets between the IMU's and the GNSS clocks are measured up to this: GNSS time against UTC
+(18 s), a receiver stamping its fixes a few seconds late. Further ones are named as another
+clock (:func:`_on_the_imu_clock`)."""
+GPS_UTC_S = 18.0
+"""GPS time runs this far ahead of UTC (the leap seconds since 1980, as of 2017): one stream
+stamped in GPS time, the other in UTC."""
 CLOCK_STEP_GAP_S = 2.0
 CLOCK_STEP_GAP_INTERVALS = 3
 """Valid fixes further apart than both (seconds, median fix intervals) bracket a gap: where a
@@ -584,25 +602,110 @@ def _mean_over(t: F64, v: F64, t0: F64, t1: F64) -> F64:
     return out
 
 
+@dataclasses.dataclass(frozen=True)
+class _LagPeak:
+    """The shift (s, + the IMU's turns later than the GNSS course's) at which the gyro's turns
+    correlate best with the GNSS course's on a grid of shifts, either way round (a yaw rate of
+    the opposite sign correlates as well, negatively), against the best one further than
+    :data:`LAG_PEAK_WINDOW_S` from it."""
+
+    shift: float
+    correlation: float
+    """signed: negative for a yaw rate of the opposite sign"""
+    rival_shift: float
+    rival_correlation: float
+    """magnitude; -inf without a shift that far"""
+    at_zero: float
+    """magnitude as stamped"""
+    inside: bool
+    """the grid and the turns overlapping the IMU go on either side of the shift"""
+
+    @property
+    def clear(self) -> bool:
+        c = abs(self.correlation)
+        return (
+            self.inside
+            and c >= MIN_LAG_CORRELATION
+            and c - self.rival_correlation >= LAG_PEAK_MARGIN
+        )
+
+    @property
+    def ambiguous(self) -> bool:
+        """Matches far apart, none of them as stamped: the offset cannot be told."""
+        c = abs(self.correlation)
+        return (
+            not self.clear
+            and self.inside
+            and min(c, self.rival_correlation) >= MIN_LAG_CORRELATION
+            and self.at_zero < c - LAG_PEAK_MARGIN
+        )
+
+    @classmethod
+    def of(cls, shifts: F64, corr: F64) -> _LagPeak | None:
+        score = np.abs(corr)
+        if np.all(np.isnan(score)):
+            return None
+        best = int(np.nanargmax(score))
+        far = (np.abs(shifts - shifts[best]) > LAG_PEAK_WINDOW_S) & ~np.isnan(score)
+        rival = int(np.argmax(np.where(far, score, -np.inf)))
+        return cls(
+            shift=float(shifts[best]),
+            correlation=float(corr[best]),
+            rival_shift=float(shifts[rival]),
+            rival_correlation=float(score[rival]) if far.any() else -math.inf,
+            at_zero=float(np.nan_to_num(np.interp(0.0, shifts, score))),
+            inside=0 < best < len(score) - 1 and not np.isnan(score[[best - 1, best + 1]]).any(),
+        )
+
+
 def _gyro(path: Path, log: Log, m: _GnssMotion, warnings: list[str]) -> None:
+    """The gyro's units and sign, and the offset of the GNSS clock against the IMU's, from its
+    turns against the GNSS course's over :data:`TURN_STEPS` s windows: the offset is searched
+    within :data:`MAX_LAG_S`, on a coarse grid and then a fine one around its best, and the
+    units and sign are judged at that offset (the best of several on a route that repeats
+    itself, as stamped when the turns match nowhere): 18 s apart, the yaw rate as stamped was
+    the opposite of the course on a road swerving every 40 s. Before,
+    the search went to 1 s: a 1.5 s or 5 s offset was named as 1.00 s, its edge, and 18 s (GPS
+    time against UTC) not at all, while the run drifted 234 m off."""
     t0, t1, turn = m.turns()
-    inside = (t0 > log.imu.t[0] + MAX_LAG_S) & (t1 < log.imu.t[-1] - MAX_LAG_S)
-    t0, t1, turn = t0[inside], t1[inside], turn[inside]
-    if np.sum(np.abs(turn)) < MIN_TURN_RAD:
+    turning = np.abs(turn) > MIN_TURN_WINDOW_RAD
+    if np.sum(np.abs(turn)) < MIN_TURN_RAD or np.count_nonzero(turning) < 5:
         return
     it = log.imu.t
     yaw_rate = log.imu.gyro[:, 2]
     heading = np.r_[0.0, np.cumsum(0.5 * (yaw_rate[1:] + yaw_rate[:-1]) * np.diff(it))]
 
-    def imu_turn(shift: float) -> F64:
-        out: F64 = np.interp(t1 + shift, it, heading) - np.interp(t0 + shift, it, heading)
+    def imu_turn(shifts: F64) -> tuple[F64, NDArray[np.bool_]]:
+        """The IMU's heading change over each window taken ``shift`` later (M, N), and which of
+        those windows lie inside the IMU's span."""
+        a, b = t0[None, :] + shifts[:, None], t1[None, :] + shifts[:, None]
+        inside: NDArray[np.bool_] = (a >= it[0]) & (b <= it[-1])
+        out: F64 = np.interp(b, it, heading) - np.interp(a, it, heading)
+        return out, inside
+
+    def correlations(shifts: F64, use: NDArray[np.bool_]) -> F64:
+        """Per shift, over the windows ``use`` marks that lie inside the IMU's span; NaN where
+        those turn too little to judge."""
+        out = np.full(len(shifts), np.nan)
+        for k in range(0, len(shifts), 64):  # (64, N) at a time: an hour's windows in 2 MB
+            g, inside = imu_turn(shifts[k : k + 64])
+            inside &= use
+            enough = (np.abs(turn) @ inside.T >= MIN_TURN_RAD) & (
+                (turning & inside).sum(axis=1) >= 5
+            )
+            out[k : k + 64] = np.where(enough, _correlations(g, turn, inside), np.nan)
         return out
 
-    g = imu_turn(0.0)
-    turning = np.abs(turn) > MIN_TURN_WINDOW_RAD
-    if np.count_nonzero(turning) < 5:
+    n = round(MAX_LAG_S / LAG_COARSE_STEP_S)
+    coarse = LAG_COARSE_STEP_S * np.arange(-n, n + 1, dtype=np.float64)
+    every = np.ones(len(turn), bool)
+    peak = _LagPeak.of(coarse, correlations(coarse, every))
+    at = peak.shift if peak is not None and (peak.clear or peak.ambiguous) else 0.0
+    g, inside = imu_turn(np.array([at]))
+    g, use = g[0], inside[0] & turning
+    if np.count_nonzero(use) < 5:
         return
-    ratio = float(np.median(g[turning] / turn[turning]))
+    ratio = float(np.median(g[use] / turn[use]))
     if DEG_S_RATIO[0] <= abs(ratio) <= DEG_S_RATIO[1]:
         raise LogError(
             path,
@@ -616,27 +719,51 @@ def _gyro(path: Path, log: Log, m: _GnssMotion, warnings: list[str]) -> None:
             "or its /tf_static"
         )
         return
-    if ratio < 0.3:
+    if ratio < 0.3 or peak is None:
         return
-    inliers = np.abs(turn - g / ratio) < TURN_OUTLIER_RAD
-    t0, t1, turn = t0[inliers], t1[inliers], turn[inliers]
-    shifts = np.arange(-MAX_LAG_S, MAX_LAG_S + 1e-9, LAG_STEP_S)
-    corr = np.array([_correlation(imu_turn(s), turn) for s in shifts])
+    imu, gnss = f"IMU {topic_of(log, 'imu')}", f"GNSS {topic_of(log, 'gnss')}"
+    if peak.ambiguous:
+        warnings.append(
+            f"{path.name}: {imu}: its turns match the {gnss} course's about as well shifted by "
+            f"{peak.shift:+.2f} s as by {peak.rival_shift:+.2f} s (correlation "
+            f"{peak.correlation:.2f} and {peak.rival_correlation:.2f}; {peak.at_zero:.2f} "
+            "as stamped): the clocks disagree, by an offset a route that repeats itself does "
+            "not tell; check how each stream is stamped"
+        )
+        return
+    if not peak.clear:
+        return
+    inliers = inside[0] & (np.abs(turn - g / ratio) < TURN_OUTLIER_RAD)
+    fine = at + LAG_STEP_S * np.arange(-12, 13, dtype=np.float64)
+    fine = fine[np.abs(fine) <= MAX_LAG_S]
+    corr = correlations(fine, inliers)
+    if np.all(np.isnan(corr)):
+        return
     best = int(np.nanargmax(corr))
-    lag = float(shifts[best])
+    lag = float(fine[best])
     if corr[best] >= MIN_LAG_CORRELATION and abs(lag) >= LAG_WARN_S:
         late = "late" if lag > 0 else "early"
+        utc = ""
+        if abs(abs(lag) - GPS_UTC_S) < 0.5:
+            utc = f"; {GPS_UTC_S:g} s is GPS time against UTC"
         warnings.append(
-            f"IMU stamps look {abs(lag):.2f} s {late} against GNSS (its turns match the GNSS "
-            f"course's best shifted by {lag:+.2f} s, correlation {corr[best]:.2f}): set "
-            f"sensors.gnss_time_offset_s = {lag:.2f} if the GNSS stamps are the late ones"
+            f"{path.name}: {imu}: its stamps look {abs(lag):.2f} s {late} against {gnss} (its "
+            f"turns match the GNSS course's best shifted by {lag:+.2f} s, correlation "
+            f"{corr[best]:.2f}{utc}): set sensors.gnss_time_offset_s = {lag:.2f}"
         )
 
 
-def _correlation(a: F64, b: F64) -> float:
-    a, b = a - a.mean(), b - b.mean()
-    den = math.sqrt(float(a @ a) * float(b @ b))
-    return float(a @ b) / den if den > 0 else math.nan
+def _correlations(a: F64, b: F64, use: NDArray[np.bool_]) -> F64:
+    """The correlation of each row of ``a`` (M, N) with ``b`` (N,) over the columns ``use``
+    (M, N) marks; NaN where either does not vary."""
+    w = use.astype(np.float64)
+    count = np.maximum(w.sum(axis=1, keepdims=True), 1.0)
+    da = (a - (a * w).sum(axis=1, keepdims=True) / count) * w
+    db = (b[None, :] - (b[None, :] * w).sum(axis=1, keepdims=True) / count) * w
+    den = np.sqrt((da * da).sum(axis=1) * (db * db).sum(axis=1))
+    with np.errstate(invalid="ignore", divide="ignore"):
+        out: F64 = np.where(den > 0, (da * db).sum(axis=1) / den, np.nan)
+    return out
 
 
 def _wheel_plausible(log: Log, m: _GnssMotion, warnings: list[str]) -> bool:

@@ -1122,14 +1122,20 @@ class SensorParams:
         (0.0, 0.0, 0.0), "GNSS antenna position in the body frame (forward, left, up)", unit="m"
     )
     gnss_time_offset_s: float = param(
-        0.0, "added to GNSS stamps to put them on the IMU clock", unit="s", lo=-2, hi=2, step=0.01
+        0.0,
+        "added to GNSS stamps to put them on the IMU clock (up to a minute: GPS time against "
+        "UTC is 18 s; the log's loading measures it from the turns)",
+        unit="s",
+        lo=-60,
+        hi=60,
+        step=0.01,
     )
     wheel_time_offset_s: float = param(
         0.0,
-        "added to wheel-speed stamps to put them on the IMU clock",
+        "added to wheel-speed stamps to put them on the IMU clock (up to a minute)",
         unit="s",
-        lo=-2,
-        hi=2,
+        lo=-60,
+        hi=60,
         step=0.01,
     )
     truth_time_offset_s: float = param(

@@ -1,8 +1,15 @@
-"""A step of the GNSS clock under a minute (estimator.io.plausibility._clock_step): the fixes
-after it were taken at the wrong time (300 m off after 20 s at road speed) or hid in a fake
-outage, without a word. It is found at the gap between fixes it leaves, named in one line and
-the fixes after it left out; a real outage, a 1 Hz receiver, a vehicle standing still, the
-bundled samples and the real logs are not named."""
+"""Clocks that disagree (estimator.io.plausibility).
+
+A step of the GNSS clock under a minute (``_clock_step``): the fixes after it were taken at the
+wrong time (300 m off after 20 s at road speed) or hid in a fake outage, without a word. It is
+found at the gap between fixes it leaves, named in one line and the fixes after it left out; a
+real outage, a 1 Hz receiver, a vehicle standing still, the bundled samples and the real logs
+are not named.
+
+A constant offset of the GNSS clock against the IMU's (``_gyro``): it was searched within 1 s,
+so 1.5 s or 5 s were named as 1.00 s (the search's edge: a confident wrong setting) and 18 s
+(GPS time against UTC) not at all, the run 234 m off. It is measured up to a minute, named with
+the setting that gives the clean run back, and not named where the route repeats itself."""
 
 from __future__ import annotations
 
@@ -14,9 +21,13 @@ from pathlib import Path
 import numpy as np
 import pytest
 
+from estimator.errors import LogError
+from estimator.evaluation import method_metrics
 from estimator.io import load_log, write_bag
-from estimator.io.plausibility import _clock_step
+from estimator.io.plausibility import MAX_LAG_S, _clock_step, _LagPeak, checked
 from estimator.log import GnssData, ImuData, Log, WheelData
+from estimator.params import Params, with_values
+from estimator.pipeline import open_inputs, run
 from estimator.sim import Simulation, simulate
 
 REPO = Path(__file__).resolve().parents[3]
@@ -173,3 +184,157 @@ def test_without_wheels_nothing_is_judged() -> None:
     """No distance driven to hold the fixes against: the check is skipped."""
     log = dataclasses.replace(_straight(SPEED, 1.0, (40.0, 40.5), 20.0), wheel=None)
     assert not _steps_named(log)
+
+
+OFFSET_SETTING = re.compile(r"set sensors\.gnss_time_offset_s = (-?[0-9.]+)$")
+
+
+def _gnss_late(log: Log, offset_s: float) -> Log:
+    """``log`` with every GNSS stamp ``offset_s`` later, checked again."""
+    g = log.gnss
+    return checked(
+        Path(log.path), dataclasses.replace(log, gnss=dataclasses.replace(g, t=g.t + offset_s))
+    )
+
+
+def _offset_lines(log: Log) -> list[str]:
+    return [w for w in log.warnings if "gnss_time_offset_s" in w or "clocks disagree" in w]
+
+
+def _setting(log: Log) -> float:
+    (line,) = _offset_lines(log)
+    found = OFFSET_SETTING.search(line)
+    assert found, line
+    return float(found[1])
+
+
+@functools.cache
+def _monaco() -> Log:
+    return load_log(REPO / "sample_logs" / "monaco_tunnel.mcap", cache_dir=None)
+
+
+@pytest.mark.parametrize("offset_s", [-0.5, 1.5, 5.0, 18.0, -18.0, 45.0])
+def test_an_offset_of_the_gnss_clock_is_measured_up_to_a_minute(offset_s: float) -> None:
+    """Was -1.00 s for 1.5 and 5 s (the edge of a 1 s search), nothing for 18 s."""
+    log = _gnss_late(_monaco(), offset_s)
+    (line,) = _offset_lines(log)
+    assert line.startswith("monaco_tunnel.mcap: IMU /imu/data: its stamps look "), line
+    assert "against GNSS /gnss/fix" in line and "correlation 0.9" in line
+    assert _setting(log) == pytest.approx(-offset_s, abs=0.08)
+    assert ("GPS time against UTC" in line) == (abs(offset_s) == 18.0)
+
+
+def test_rates_in_deg_s_are_refused_at_the_measured_offset() -> None:
+    """The units are judged where the turns match, not as stamped 18 s apart."""
+    log = _gnss_late(_monaco(), 18.0)
+    imu = dataclasses.replace(log.imu, gyro=np.degrees(log.imu.gyro))
+    with pytest.raises(LogError, match="look like deg/s"):
+        checked(Path(log.path), dataclasses.replace(log, imu=imu, warnings=()))
+
+
+@functools.cache
+def _truth_rmse(seed: int, offset_s: float, setting_s: float | None) -> tuple[float, float | None]:
+    """The proposed run's truth RMSE over the simulated drive's tunnel with its GNSS stamped
+    ``offset_s`` late, with ``sensors.gnss_time_offset_s`` at ``setting_s`` (None: the one the
+    warning recommends), and the setting used."""
+    sim = simulate("short_tunnel", seed=seed)
+    log = _gnss_late(sim.log("drive.mcap"), offset_s)
+    setting = _setting(log) if setting_s is None else setting_s
+    params = with_values(Params(), {"sensors.gnss_time_offset_s": setting})
+    route = sim.route()
+    r = run(log, route, params, method="proposed", frame=sim.frame)
+    truth = method_metrics(r, route, log, params=r.params).truth
+    assert truth is not None and truth.rmse_h_err_m is not None
+    return truth.rmse_h_err_m, setting
+
+
+@pytest.mark.parametrize("offset_s", [1.5, 18.0])
+def test_the_recommended_setting_gives_the_clean_run_back(offset_s: float) -> None:
+    """Left as stamped the run is 47 m (1.5 s) and 323 m (18 s) off the truth over the tunnel;
+    with the setting named it is the clean run's 0.4 m within the measurement's 0.06 s (on this
+    drive), 1 m at 15 m/s."""
+    clean, _ = _truth_rmse(0, 0.0, 0.0)
+    as_stamped, _ = _truth_rmse(0, offset_s, 0.0)
+    repaired, setting = _truth_rmse(0, offset_s, None)
+    assert setting == pytest.approx(-offset_s, abs=0.08)
+    assert as_stamped > 40.0
+    assert repaired < clean + 1.2
+
+
+@pytest.mark.slow
+@pytest.mark.parametrize("offset_s", [1.5, 18.0])
+def test_the_recommended_setting_gives_the_sample_its_clean_run_back(offset_s: float) -> None:
+    """monaco_tunnel: 23 m (1.5 s) and 234 m (18 s) left as stamped; 0.98 m with the setting
+    (-1.56, -18.06 s) against 0.76 m clean."""
+    inputs = open_inputs(
+        REPO / "sample_logs" / "monaco_tunnel.mcap",
+        REPO / "sample_logs" / "monaco_tunnel.route.geojson",
+        cache_dir=None,
+    )
+    assert inputs.route is not None
+
+    def rmse(log: Log, setting: float) -> float:
+        params = with_values(Params(), {"sensors.gnss_time_offset_s": setting})
+        r = run(log, inputs.route, params, method="proposed", frame=inputs.frame)
+        truth = method_metrics(r, inputs.route, log, params=r.params).truth
+        assert truth is not None and truth.rmse_h_err_m is not None
+        return truth.rmse_h_err_m
+
+    late = _gnss_late(inputs.log, offset_s)
+    assert rmse(late, _setting(late)) < rmse(inputs.log, 0.0) + 0.3
+
+
+@pytest.mark.parametrize("sample", SAMPLES, ids=lambda p: p.name)
+def test_no_bundled_sample_names_an_offset(sample: Path) -> None:
+    assert not _offset_lines(load_log(sample, cache_dir=None))
+
+
+@pytest.mark.parametrize("name", REAL_LOGS)
+def test_no_real_log_names_an_offset(shared_data: Path, name: str) -> None:
+    path = shared_data / name
+    if not path.exists():
+        pytest.skip(f"real data not found: {path}")
+    assert not _offset_lines(load_log(path, cache_dir=None))
+
+
+def _laps(offset_s: float) -> Log:
+    """400 s at 10 m/s round a circuit of 40 s laps, each a left turn then a straight (a route
+    that repeats itself), fixes at 5 Hz stamped ``offset_s`` late."""
+    t = T0 + np.arange(0.0, 400.0, 0.01)
+    yaw_rate = 0.3 * np.maximum(np.sin(2 * np.pi * (t - T0) / 40.0), 0.0) ** 2
+    heading = np.cumsum(yaw_rate) * 0.01
+    gyro = np.column_stack([np.zeros_like(t), np.zeros_like(t), yaw_rate])
+    imu = ImuData(t, gyro, np.tile([0.0, 0.0, 9.81], (len(t), 1)))
+    east = np.cumsum(10.0 * np.cos(heading)) * 0.01
+    north = np.cumsum(10.0 * np.sin(heading)) * 0.01
+    k = np.arange(0, len(t), 20)
+    lat = 48.0 + north[k] / 111_320.0
+    lon = 11.0 + east[k] / (111_320.0 * np.cos(np.radians(48.0)))
+    n = len(k)
+    gnss = GnssData(
+        t[k] + offset_s,
+        lat,
+        lon,
+        np.full(n, 500.0),
+        np.zeros(n, np.int8),
+        np.tile([1.0, 1.0, 4.0], (n, 1)),
+    )
+    return Log("laps.mcap", imu, gnss, WheelData(t[::2], np.full(len(t[::2]), 10.0)))
+
+
+def test_a_route_that_repeats_itself_gives_no_offset_but_says_the_clocks_disagree() -> None:
+    """Its turns match at -18 s and at -18 s +- 40 s alike: no one offset is named."""
+    (line,) = _offset_lines(checked(Path("laps.mcap"), _laps(18.0)))
+    assert line.startswith(
+        "laps.mcap: IMU imu: its turns match the GNSS gnss course's about as well"
+    )
+    assert "the clocks disagree" in line and "gnss_time_offset_s" not in line
+    assert not _offset_lines(checked(Path("laps.mcap"), _laps(0.0)))
+
+
+def test_a_match_at_the_edge_of_the_search_is_no_offset() -> None:
+    """Correlations still rising at the search's end: the offset lies beyond it, not there."""
+    shifts = np.linspace(-MAX_LAG_S, MAX_LAG_S, 481)
+    peak = _LagPeak.of(shifts, np.linspace(0.0, 0.99, 481))
+    assert peak is not None and peak.shift == MAX_LAG_S
+    assert not peak.clear and not peak.ambiguous
