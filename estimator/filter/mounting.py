@@ -181,20 +181,6 @@ def mount_warning(
     )
 
 
-def _window_means(t: F64, v: F64, t0: F64, t1: F64) -> F64:
-    """Mean of a sampled signal (N, K) over each interval (M,) -> (M, K), from its running
-    integral."""
-    step = 0.5 * (v[1:] + v[:-1]) * np.diff(t)[:, None]
-    integral = np.vstack([np.zeros((1, v.shape[1])), np.cumsum(step, axis=0)])
-    width = np.maximum(t1 - t0, 1e-9)
-    columns = [
-        (np.interp(t1, t, integral[:, k]) - np.interp(t0, t, integral[:, k])) / width
-        for k in range(v.shape[1])
-    ]
-    out: F64 = np.column_stack(columns)
-    return out
-
-
 def _gnss_speed(gnss_t: F64, gnss_xy: F64, t: F64) -> tuple[F64, NDArray[np.bool_]]:
     """Horizontal speed from the fixes at ``t`` and where fixes cover it without a gap."""
     h = GNSS_SPEED_SPAN_S
@@ -242,11 +228,15 @@ def mount_yaw(
     e1 = ref - (ref @ up) * up
     e1 /= np.linalg.norm(e1)
     e2 = np.cross(up, e1)
-    t0 = np.arange(imu_t[0], imu_t[-1] - WINDOW_S, WINDOW_S / 2)
-    t1 = t0 + WINDOW_S
-    usable = _covered(imu_t, t0, t1)
-    have_wheel = len(wheel_t) >= 2
-    if have_wheel:
+    # windows of two half-windows each, whose IMU sums are added up once
+    edges = np.arange(imu_t[0], imu_t[-1], WINDOW_S / 2)
+    if len(edges) < 3:
+        return None
+    first = np.searchsorted(imu_t, edges)
+    count = np.diff(np.r_[first, len(imu_t)])
+    t0, t1 = edges[:-2], edges[2:]
+    usable = _covered(imu_t, t0, t1) & (count[:-2] > 0) & (count[1:-1] > 0)
+    if len(wheel_t) >= 2:
         usable &= (t0 >= wheel_t[0]) & (t1 <= wheel_t[-1])
         speed_t, speed_v = wheel_t, wheel_v
         v0, v1 = np.interp(t0, wheel_t, wheel_v), np.interp(t1, wheel_t, wheel_v)
@@ -254,20 +244,19 @@ def mount_yaw(
     else:
         if len(gnss_t) < 10:
             return None
-        v0, ok0 = _gnss_speed(gnss_t, gnss_xy, t0)
-        v1, ok1 = _gnss_speed(gnss_t, gnss_xy, t1)
-        usable &= ok0 & ok1
-        speed_t = np.r_[t0, t1[-1:]] if len(t0) else t0
-        speed_v = np.r_[v0, v1[-1:]] if len(t0) else t0
+        speed_t = edges
+        speed_v, covered = _gnss_speed(gnss_t, gnss_xy, edges)
+        v0, v1 = speed_v[:-2], speed_v[2:]
+        usable &= covered[:-2] & covered[2:]
         source = "GNSS speed"
-    t0, t1, v0, v1 = t0[usable], t1[usable], v0[usable], v1[usable]
-    if len(t0) < 10:
+    if np.count_nonzero(usable) < 10:
         return None
-    yaw_rate = gyro @ up
     speed = np.interp(imu_t, speed_t, speed_v)
-    forward = (v1 - v0) / WINDOW_S
-    left = _window_means(imu_t, (speed * yaw_rate)[:, None], t0, t1)[:, 0]
-    f = _window_means(imu_t, accel, t0, t1)
+    signals = np.column_stack([accel, speed * (gyro @ up)])
+    sums = np.add.reduceat(signals, first, axis=0)
+    means = (sums[:-2] + sums[1:-1])[usable] / (count[:-2] + count[1:-1])[usable, None]
+    f, left = means[:, :3], means[:, 3]
+    forward = (v1 - v0)[usable] / WINDOW_S
     x = np.column_stack([forward, left])
     y = np.column_stack([f @ e1, f @ e2])
     x = x - x.mean(axis=0)
