@@ -252,10 +252,11 @@ def mount_yaw(
     if np.count_nonzero(usable) < 10:
         return None
     speed = np.interp(imu_t, speed_t, speed_v)
-    signals = np.column_stack([accel, speed * (gyro @ up)])
-    sums = np.add.reduceat(signals, first, axis=0)
-    means = (sums[:-2] + sums[1:-1])[usable] / (count[:-2] + count[1:-1])[usable, None]
-    f, left = means[:, :3], means[:, 3]
+    n = (count[:-2] + count[1:-1])[usable]
+    f_sums = np.add.reduceat(accel, first, axis=0)
+    f = (f_sums[:-2] + f_sums[1:-1])[usable] / n[:, None]
+    left_sums = np.add.reduceat(speed * (gyro @ up), first)
+    left = (left_sums[:-2] + left_sums[1:-1])[usable] / n
     forward = (v1 - v0)[usable] / WINDOW_S
     x = np.column_stack([forward, left])
     y = np.column_stack([f @ e1, f @ e2])
