@@ -8,6 +8,7 @@ from __future__ import annotations
 import contextlib
 import math
 from dataclasses import dataclass
+from pathlib import Path
 
 import numpy as np
 from numpy.typing import NDArray
@@ -61,8 +62,9 @@ from estimator.filter.layout import (
     NC,
     NI,
 )
+from estimator.filter.mounting import mount_warning, mount_yaw
 from estimator.filter.moving_mean import moving_mean
-from estimator.io.plausibility import off_the_imu_clock
+from estimator.io.plausibility import off_the_imu_clock, topic_of
 from estimator.log import Log, wheel_gap_s
 from estimator.nav.earth import earth_rate_n, normal_gravity
 from estimator.nav.frames import LocalFrame
@@ -128,6 +130,7 @@ def prepare_inputs(log: Log, p: Params, frame: LocalFrame, outages: Outages) -> 
     imu_t, gyro, accel = _imu_arrays(log, s, warnings)
     wheel_t, wheel_v = _wheel_arrays(log, s, warnings)
     gnss_t, gnss_pos, gnss_var = _gnss_arrays(log, p, frame, outages)
+    warnings.extend(_mounting(log, s, imu_t, gyro, accel, wheel_t, wheel_v, gnss_t, gnss_pos))
     gaps = np.flatnonzero(np.diff(imu_t) > IMU_GAP_S)
     gnss_t, gnss_pos, gnss_var, left_out = _outside_imu_gaps(
         imu_t, gaps, gnss_t, gnss_pos, gnss_var
@@ -379,6 +382,29 @@ def _imu_arrays(log: Log, s: SensorParams, warnings: list[str]) -> tuple[F64, F6
         gyro = gyro @ r_bi.T
         accel = accel @ r_bi.T
     return imu_t, np.ascontiguousarray(gyro), np.ascontiguousarray(accel)
+
+
+def _mounting(
+    log: Log,
+    s: SensorParams,
+    imu_t: F64,
+    gyro: F64,
+    accel: F64,
+    wheel_t: F64,
+    wheel_v: F64,
+    gnss_t: F64,
+    gnss_pos: F64,
+) -> tuple[str, ...]:
+    """A line when the IMU, turned by the configured mounting, is still not forward-left-up
+    (:func:`estimator.filter.mounting.mount_warning`). Judged here, where the configuration is
+    known, not when the log is read: there a Husky's IMU on its side and turned -90 deg would
+    be named whatever its configuration says."""
+    found = mount_yaw(imu_t, gyro, accel, wheel_t, wheel_v, gnss_t, gnss_pos[:, :2])
+    name = Path(log.path).name
+    line = mount_warning(
+        name, topic_of(log, "imu"), found, s.imu_roll_deg, s.imu_pitch_deg, s.imu_yaw_deg
+    )
+    return () if line is None else (line,)
 
 
 def _wheel_arrays(log: Log, s: SensorParams, warnings: list[str]) -> tuple[F64, F64]:
