@@ -44,6 +44,11 @@ TURN_STEPS = 5
 """course changes are taken over this many ~1 s steps"""
 DEG_S_RATIO = (20.0, 120.0)
 """gyro yaw rate / GNSS course rate in this range: the rates are in deg/s (57.3)"""
+GYRO_SCALE_OK = (0.8, 1.25)
+"""The gyro's heading change about gravity over the GNSS course's, outside this range: its
+angular rates are scaled wrong (raw counts, mrad/s, a wrong full-scale setting); a MEMS gyro's
+scale is within a few per cent, the course's turns within several."""
+MRAD_S_RATIO = (800.0, 1250.0)
 LAG_WARN_S = 0.2
 MIN_LAG_CORRELATION = 0.7
 LAG_COARSE_STEP_S = 0.25
@@ -149,7 +154,7 @@ def checked(path: Path, log: Log) -> Log:
     warnings: list[str] = []
     _imu_rate(path, log)
     log = _on_the_imu_clock(path, log, warnings)
-    _imu_alive(path, log, warnings)
+    gyro_alive = _imu_alive(path, log, warnings)
     _gravity(path, log, warnings)
     log = dataclasses.replace(log, gnss=_far_fixes(path, log, warnings))
     log = dataclasses.replace(log, gnss=_held_fixes(path, log, warnings))
@@ -157,10 +162,11 @@ def checked(path: Path, log: Log) -> Log:
     log = dataclasses.replace(log, gnss=gnss)
     motion = _gnss_motion(log)
     if motion is not None:
-        _gyro(path, log, motion, warnings)
+        gyro_alive &= _gyro(path, log, motion, warnings)
         if log.wheel is not None and not _wheel_plausible(log, motion, warnings):
             log = dataclasses.replace(log, wheel=None)
-    log = dataclasses.replace(log, gnss=_clock_step(path, log, warnings))
+    if gyro_alive:
+        log = dataclasses.replace(log, gnss=_clock_step(path, log, warnings))
     if not warnings:
         return log
     return dataclasses.replace(log, warnings=(*log.warnings, *warnings))
@@ -492,12 +498,13 @@ def _span(log: Log, t: F64) -> str:
     return f"{float(t.min()) - t0:.1f}-{float(t.max()) - t0:.1f} s"
 
 
-def _imu_alive(path: Path, log: Log, warnings: list[str]) -> None:
+def _imu_alive(path: Path, log: Log, warnings: list[str]) -> bool:
     """Refuse an IMU without accelerations (nothing to dead-reckon with); name a gyro, or an
     axis, that reads exactly zero throughout. A ROS driver that does not fill
     ``angular_velocity`` (its covariance -1) publishes zeros: the heading then follows only
     the fixes, an outage is dead-reckoned straight on, and the run's own warnings (few fixes
-    used, every match refused, a huge accelerometer bias) never said why."""
+    used, every match refused, a huge accelerometer bias) never said why. False when the gyro
+    cannot be dead-reckoned with (frozen, or a dead axis)."""
     v = np.hstack([log.imu.gyro, log.imu.accel])
     if not np.any(v):
         raise LogError(path, "IMU: every sample is zero (a dead or unconnected sensor)")
@@ -505,7 +512,7 @@ def _imu_alive(path: Path, log: Log, warnings: list[str]) -> None:
         warnings.append(
             "IMU: every sample is the same, without any noise (a frozen sensor, or simulated)"
         )
-        return
+        return False
     topic = topic_of(log, "imu")
     if not np.any(log.imu.accel):
         raise LogError(
@@ -526,6 +533,7 @@ def _imu_alive(path: Path, log: Log, warnings: list[str]) -> None:
             f"{path.name}: IMU {topic}: every sample of its {axes} axis is zero (a dead axis, "
             "or a driver that does not fill it): the estimate is wrong wherever that axis moves"
         )
+    return not dead[:3].any()
 
 
 _IMU_AXES = tuple((kind, axis) for kind in ("gyro", "accelerometer") for axis in "xyz")
@@ -658,19 +666,20 @@ class _LagPeak:
         )
 
 
-def _gyro(path: Path, log: Log, m: _GnssMotion, warnings: list[str]) -> None:
-    """The gyro's units and sign, and the offset of the GNSS clock against the IMU's, from its
-    turns against the GNSS course's over :data:`TURN_STEPS` s windows: the offset is searched
-    within :data:`MAX_LAG_S`, on a coarse grid and then a fine one around its best, and the
-    units and sign are judged at that offset (the best of several on a route that repeats
-    itself, as stamped when the turns match nowhere): 18 s apart, the yaw rate as stamped was
-    the opposite of the course on a road swerving every 40 s. Before,
-    the search went to 1 s: a 1.5 s or 5 s offset was named as 1.00 s, its edge, and 18 s (GPS
-    time against UTC) not at all, while the run drifted 234 m off."""
+def _gyro(path: Path, log: Log, m: _GnssMotion, warnings: list[str]) -> bool:
+    """The gyro's units, scale and sign, and the offset of the GNSS clock against the IMU's,
+    from its turns against the GNSS course's over :data:`TURN_STEPS` s windows; False when its
+    scale is wrong (:func:`_gyro_scale`), so that no other check dead-reckons with it. The
+    offset is searched within :data:`MAX_LAG_S`, on a coarse grid and then a fine one around
+    its best, and the units and sign are judged at that offset (the best of several on a route
+    that repeats itself, as stamped when the turns match nowhere): 18 s apart, the yaw rate as
+    stamped was the opposite of the course on a road swerving every 40 s. Before, the search
+    went to 1 s: a 1.5 s or 5 s offset was named as 1.00 s, its edge, and 18 s (GPS time
+    against UTC) not at all, while the run drifted 234 m off."""
     t0, t1, turn = m.turns()
     turning = np.abs(turn) > MIN_TURN_WINDOW_RAD
     if np.sum(np.abs(turn)) < MIN_TURN_RAD or np.count_nonzero(turning) < 5:
-        return
+        return True
     it = log.imu.t
     yaw_rate = log.imu.gyro[:, 2]
     heading = np.r_[0.0, np.cumsum(0.5 * (yaw_rate[1:] + yaw_rate[:-1]) * np.diff(it))]
@@ -704,7 +713,7 @@ def _gyro(path: Path, log: Log, m: _GnssMotion, warnings: list[str]) -> None:
     g, inside = imu_turn(np.array([at]))
     g, use = g[0], inside[0] & turning
     if np.count_nonzero(use) < 5:
-        return
+        return True
     ratio = float(np.median(g[use] / turn[use]))
     if DEG_S_RATIO[0] <= abs(ratio) <= DEG_S_RATIO[1]:
         raise LogError(
@@ -712,15 +721,16 @@ def _gyro(path: Path, log: Log, m: _GnssMotion, warnings: list[str]) -> None:
             f"IMU angular rates look like deg/s, not rad/s (its heading turns {abs(ratio):.0f} "
             "times the GNSS course): scale angular_velocity by pi/180",
         )
+    scale_ok = _gyro_scale(path, log, t0[use] + at, t1[use] + at, turn[use], warnings)
     if ratio < -0.5:
         warnings.append(
             f"IMU: yaw rate has the opposite sign of the GNSS course's turns (ratio {ratio:.2f}): "
             "the IMU axes are not forward-left-up (an FRD or NED IMU?); fix the driver's frame "
             "or its /tf_static"
         )
-        return
+        return scale_ok
     if ratio < 0.3 or peak is None:
-        return
+        return scale_ok
     imu, gnss = f"IMU {topic_of(log, 'imu')}", f"GNSS {topic_of(log, 'gnss')}"
     if peak.ambiguous:
         warnings.append(
@@ -730,15 +740,15 @@ def _gyro(path: Path, log: Log, m: _GnssMotion, warnings: list[str]) -> None:
             "as stamped): the clocks disagree, by an offset a route that repeats itself does "
             "not tell; check how each stream is stamped"
         )
-        return
+        return scale_ok
     if not peak.clear:
-        return
+        return scale_ok
     inliers = inside[0] & (np.abs(turn - g / ratio) < TURN_OUTLIER_RAD)
     fine = at + LAG_STEP_S * np.arange(-12, 13, dtype=np.float64)
     fine = fine[np.abs(fine) <= MAX_LAG_S]
     corr = correlations(fine, inliers)
     if np.all(np.isnan(corr)):
-        return
+        return scale_ok
     best = int(np.nanargmax(corr))
     lag = float(fine[best])
     if corr[best] >= MIN_LAG_CORRELATION and abs(lag) >= LAG_WARN_S:
@@ -751,6 +761,38 @@ def _gyro(path: Path, log: Log, m: _GnssMotion, warnings: list[str]) -> None:
             f"turns match the GNSS course's best shifted by {lag:+.2f} s, correlation "
             f"{corr[best]:.2f}{utc}): set sensors.gnss_time_offset_s = {lag:.2f}"
         )
+    return scale_ok
+
+
+def _gyro_scale(path: Path, log: Log, t0: F64, t1: F64, turn: F64, warnings: list[str]) -> bool:
+    """Name a gyro whose heading change about gravity over the windows ``t0``-``t1`` (on the
+    IMU clock) is not the GNSS course's ``turn`` there (:data:`GYRO_SCALE_OK`). Taken about
+    gravity (the accelerometer's mean direction), not the z axis, so an IMU mounted on its
+    side (the Husky's) is judged by its real yaw rate. A gyro in mrad/s or scaled by ten
+    dead-reckoned monaco's tunnel 951 and 1639 m off while the run spoke of refused fixes
+    and matches and a forward accelerometer bias of 150-230 mg, never of the gyro."""
+    imu = log.imu
+    if not np.all(np.any(imu.gyro, axis=0)):
+        return False  # a dead gyro or axis: named by _imu_alive
+    up = np.mean(imu.accel, axis=0)
+    yaw_rate = imu.gyro @ (up / max(float(np.linalg.norm(up)), 1e-9))
+    heading = np.r_[0.0, np.cumsum(0.5 * (yaw_rate[1:] + yaw_rate[:-1]) * np.diff(imu.t))]
+    turned = np.interp(t1, imu.t, heading) - np.interp(t0, imu.t, heading)
+    scale = abs(float(np.median(turned / turn)))
+    if GYRO_SCALE_OK[0] <= scale <= GYRO_SCALE_OK[1]:
+        return True
+    if MRAD_S_RATIO[0] <= scale <= MRAD_S_RATIO[1]:
+        cause = "mrad/s, not rad/s: scale angular_velocity by 1e-3"
+    elif scale < GYRO_SCALE_OK[0] / 10:
+        cause = "a gyro that does not follow the turns (dead, or its rate not filled)"
+    else:
+        cause = "angular rates scaled wrong (raw counts, a wrong full-scale range)"
+    warnings.append(
+        f"{path.name}: IMU {topic_of(log, 'imu')}: its heading about gravity turns {scale:.3g} "
+        f"times the GNSS course over {len(turn)} turning windows (1 within a few per cent when "
+        f"right): looks like {cause}; every outage is dead-reckoned with the heading wrong"
+    )
+    return False
 
 
 def _correlations(a: F64, b: F64, use: NDArray[np.bool_]) -> F64:
