@@ -297,6 +297,12 @@ _SHOWN: dict[str, tuple[tuple[str, str, str], ...]] = {
         ("scrub_p95_ms", "scrub p95 ms", "{:.1f}"),
     ),
     "export": (("wall_s", "wall s", "{:.1f}"), ("cpu_s", "cpu s", "{:.1f}")),
+    "route_parse": (
+        ("worst_peak_rss_mb", "worst peak MB", "{:.0f}"),
+        ("xml_csv_route_peak_rss_mb", "GPX/KML/CSV route MB", "{:.0f}"),
+        ("line_geojson_file_cpu_s", "GeoJSON line cpu s", "{:.1f}"),
+        ("long_gpx_file_cpu_s", "GPX track cpu s", "{:.1f}"),
+    ),
     "startup_help": (
         ("wall_s", "wall s", "{:.3f}"),
         ("wall_median_s", "median s", "{:.3f}"),

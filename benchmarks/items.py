@@ -148,6 +148,18 @@ ITEMS: tuple[Item, ...] = (
         },
     ),
     Item("export", "routefuse export (all files)", ("10min",), {}),
+    Item(
+        "route_parse",
+        "route files at the caps (benchmarks/route_parse_memory.py): peak RSS of reading each "
+        "in a fresh process (the 5min log is not used)",
+        ("5min",),
+        {
+            "5min": (
+                Target("worst_peak_rss_mb", "<=", 450.0, "every file <= 450 MB"),
+                Target("xml_csv_route_peak_rss_mb", "<=", 250.0, "GPX/KML/CSV route <= 250 MB"),
+            )
+        },
+    ),
 )
 ITEM_NAMES = tuple(i.name for i in ITEMS)
 

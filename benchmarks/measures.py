@@ -374,6 +374,13 @@ def measure_startup_run(paths: BenchLog, repeat: int) -> Figures:
     return figs
 
 
+def measure_route_parse(paths: BenchLog, repeat: int) -> Figures:
+    """Route files at the caps, each read in a fresh process (once: a peak, not a time)."""
+    from benchmarks.route_parse_memory import default_dir, run_cases, summary
+
+    return summary(run_cases(default_dir()))
+
+
 MEASURES: dict[str, Callable[[BenchLog, int], Figures]] = {
     "load_first": measure_load_first,
     "load_cached": measure_load_cached,
@@ -387,6 +394,7 @@ MEASURES: dict[str, Callable[[BenchLog, int], Figures]] = {
     "export": measure_export,
     "startup_help": measure_startup_help,
     "startup_run": measure_startup_run,
+    "route_parse": measure_route_parse,
 }
 
 
