@@ -191,6 +191,20 @@ def _gnss_speed(gnss_t: F64, gnss_xy: F64, t: F64) -> tuple[F64, NDArray[np.bool
     return speed, covered
 
 
+def _half_window_edges(imu_t: F64) -> F64:
+    """Edges every half window over the stretches the IMU has samples in: a clock that jumps
+    years forward leaves years without samples, which a grid over the whole span would fill
+    with windows (10 years asked 14 GB). Windows across a hole are refused by
+    :func:`_covered`."""
+    holes = np.flatnonzero(np.diff(imu_t) > WINDOW_S / 2)
+    starts = np.r_[imu_t[0], imu_t[holes + 1]]
+    ends = np.r_[imu_t[holes], imu_t[-1]]
+    out: F64 = np.concatenate(
+        [np.arange(a, b, WINDOW_S / 2) for a, b in zip(starts, ends, strict=True)]
+    )
+    return out
+
+
 def _covered(ts: F64, t0: F64, t1: F64) -> NDArray[np.bool_]:
     """Whether samples ``ts`` span each interval without a gap above :data:`MAX_FIX_GAP_S`."""
     if len(ts) < 2:
@@ -229,7 +243,7 @@ def mount_yaw(
     e1 /= np.linalg.norm(e1)
     e2 = np.cross(up, e1)
     # windows of two half-windows each, whose IMU sums are added up once
-    edges = np.arange(imu_t[0], imu_t[-1], WINDOW_S / 2)
+    edges = _half_window_edges(imu_t)
     if len(edges) < 3:
         return None
     first = np.searchsorted(imu_t, edges)
