@@ -31,6 +31,11 @@ JUMP_MIN_S = 1.0
 JUMP_MIN_INTERVALS = 50
 """A step back in a stream's stamps of more than both is its clock jumping back, not samples
 arriving out of order."""
+GNSS_JUMP_MIN_INTERVALS = 5
+"""The same for fixes, a few a second: a receiver's messages do not arrive seconds out of order,
+while its clock stepping back 2-10 s (a leap second applied late, a time-source switch) left
+fixes of two stretches of the drive interleaved after sorting, named only as samples out of
+order and repeated stamps (50 intervals is 10 s at 5 Hz, 50 s at 1 Hz)."""
 ISOLATED_GAP_MIN_S = 10.0
 ISOLATED_GAP_INTERVALS = 1000
 """Samples separated from the rest of their stream by more than both (and few: see
@@ -45,7 +50,13 @@ def _median_step(t: F64) -> float:
     return float(np.median(dt)) if len(dt) else 0.0
 
 
-def _mend_jumps(name: str, t: F64, warnings: list[str], shared: list[float]) -> F64:
+def _mend_jumps(
+    name: str,
+    t: F64,
+    warnings: list[str],
+    shared: list[float],
+    min_intervals: int = JUMP_MIN_INTERVALS,
+) -> F64:
     """A clock that jumps back (an NTP step, a recorder restart) leaves the samples after the
     jump stamped earlier than those before it: sorted by stamp, two stretches of the drive would
     interleave, and without sorting every sample after the jump is behind its predecessor. The
@@ -57,7 +68,7 @@ def _mend_jumps(name: str, t: F64, warnings: list[str], shared: list[float]) -> 
     if step <= 0:
         return t
     d = np.diff(t)
-    jumps = np.flatnonzero(d < -max(JUMP_MIN_S, JUMP_MIN_INTERVALS * step))
+    jumps = np.flatnonzero(d < -max(JUMP_MIN_S, min_intervals * step))
     if not len(jumps):
         return t
     t = t.copy()
@@ -130,9 +141,10 @@ def _clean(
     drop_nonfinite: bool,
     limits: tuple[float, ...] | None = None,
     jumps: list[float] | None = None,
+    jump_min_intervals: int = JUMP_MIN_INTERVALS,
 ) -> tuple[F64, F64]:
     if jumps is not None:
-        t = _mend_jumps(name, t, warnings, jumps)
+        t = _mend_jumps(name, t, warnings, jumps, jump_min_intervals)
     order = np.argsort(t, kind="stable")
     if np.any(order != np.arange(len(t))):
         moved = int(np.count_nonzero(np.diff(t) < 0))
@@ -238,7 +250,12 @@ def assemble(
     imu = _imu(path, roles, raw, warnings, jumps)
 
     gt, gv = _clean(
-        f"GNSS {roles.gnss}", *raw.streams["gnss"][:2], warnings, drop_nonfinite=False, jumps=jumps
+        f"GNSS {roles.gnss}",
+        *raw.streams["gnss"][:2],
+        warnings,
+        drop_nonfinite=False,
+        jumps=jumps,
+        jump_min_intervals=GNSS_JUMP_MIN_INTERVALS,
     )
     if len(gt) == 0:
         raise LogError(path, f"GNSS topic {roles.gnss} has no messages")

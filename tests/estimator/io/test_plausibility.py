@@ -42,17 +42,29 @@ def _drive() -> Simulation:
     return simulate("short_tunnel", seed=0)
 
 
-def _stepped(tmp_path: Path, at_s: float, step_s: float) -> Path:
+def _stepped(tmp_path: Path, at_s: float, step_s: float, *, silent_in_tunnel: bool = False) -> Path:
     """The drive with the GNSS receiver's stamps ``step_s`` off from ``at_s`` after its start
-    (the recorder's receive times run on)."""
+    (the recorder's receive times run on); ``silent_in_tunnel``: the receiver sends nothing
+    without a fix (the simulated one sends NO_FIX messages)."""
     sim = _drive()
-    t = sim.gnss.t
+    gnss = sim.gnss
+    if silent_in_tunnel:
+        keep = gnss.valid
+        gnss = GnssData(
+            gnss.t[keep],
+            gnss.lat[keep],
+            gnss.lon[keep],
+            gnss.alt[keep],
+            gnss.status[keep],
+            gnss.cov_enu[keep],
+        )
+    t = gnss.t
     stamps = np.where(t >= sim.imu.t[0] + at_s, t + step_s, t)
     path = tmp_path / f"step_{step_s:+g}s_at_{at_s:g}s.mcap"
     write_bag(
         path,
         imu=sim.imu,
-        gnss=sim.gnss,
+        gnss=gnss,
         wheel=sim.wheel,
         truth=sim.truth_fix,
         header_stamps={"gnss": stamps},
@@ -89,12 +101,30 @@ def test_a_step_near_the_end_is_named_not_dropped_in_silence(tmp_path: Path) -> 
 
 
 def test_a_backward_step_inside_an_outage_is_named(tmp_path: Path) -> None:
-    """-10 s inside the tunnel: the stamps stay in order, the outage looks 10 s shorter and
-    the fixes after it are 10 s early."""
-    log = load_log(_stepped(tmp_path, 50.0, -10.0), cache_dir=tmp_path / "cache")
+    """-10 s inside the tunnel, the receiver silent there: the stamps stay in order, the
+    outage looks 10 s shorter and the fixes after it are 10 s early."""
+    path = _stepped(tmp_path, 50.0, -10.0, silent_in_tunnel=True)
+    log = load_log(path, cache_dir=tmp_path / "cache")
     (line,) = _named(log)
     assert "its clock steps 10.0 s back after 38.0 s" in line
     assert "the 40 fixes stamped 56.8-64.6 s are left out" in line
+
+
+@pytest.mark.parametrize(("at_s", "step_s"), [(50.0, -10.0), (20.0, -2.0), (20.0, -5.0)])
+def test_a_receiver_sending_on_that_steps_back_is_mended_exactly(
+    tmp_path: Path, at_s: float, step_s: float
+) -> None:
+    """A receiver that keeps sending (no-fix messages in the tunnel, fixes in open sky)
+    shows the step back in its own stamps: the repair moves the messages after it forward to
+    continue the stream (:data:`~estimator.io.repair.GNSS_JUMP_MIN_INTERVALS`), every stamp
+    as the receiver should have stamped it. Under 10 s at 5 Hz this was sorted into two
+    interleaved stretches of the drive, named only as samples out of order."""
+    log = load_log(_stepped(tmp_path, at_s, step_s), cache_dir=tmp_path / "cache")
+    (line,) = log.warnings
+    assert line.startswith(f"GNSS /gnss/fix: clock jumps back {-step_s - 0.2:.3f} s after ")
+    assert line.endswith(f"moved {-step_s:.3f} s forward to continue it (data kept)")
+    assert np.array_equal(log.gnss.t, _drive().gnss.t)
+    assert not _named(log)
 
 
 def test_the_clean_drive_is_not_named_and_its_fixes_untouched(tmp_path: Path) -> None:
