@@ -721,7 +721,8 @@ def _gyro(path: Path, log: Log, m: _GnssMotion, warnings: list[str]) -> bool:
             f"IMU angular rates look like deg/s, not rad/s (its heading turns {abs(ratio):.0f} "
             "times the GNSS course): scale angular_velocity by pi/180",
         )
-    scale_ok = _gyro_scale(path, log, t0[use] + at, t1[use] + at, turn[use], warnings)
+    every = inside[0]
+    scale_ok = _gyro_scale(path, log, t0[every] + at, t1[every] + at, turn[every], warnings)
     if ratio < -0.5:
         warnings.append(
             f"IMU: yaw rate has the opposite sign of the GNSS course's turns (ratio {ratio:.2f}): "
@@ -767,10 +768,14 @@ def _gyro(path: Path, log: Log, m: _GnssMotion, warnings: list[str]) -> bool:
 def _gyro_scale(path: Path, log: Log, t0: F64, t1: F64, turn: F64, warnings: list[str]) -> bool:
     """Name a gyro whose heading change about gravity over the windows ``t0``-``t1`` (on the
     IMU clock) is not the GNSS course's ``turn`` there (:data:`GYRO_SCALE_OK`). Taken about
-    gravity (the accelerometer's mean direction), not the z axis, so an IMU mounted on its
-    side (the Husky's) is judged by its real yaw rate. A gyro in mrad/s or scaled by ten
-    dead-reckoned monaco's tunnel 951 and 1639 m off while the run spoke of refused fixes
-    and matches and a forward accelerometer bias of 150-230 mg, never of the gyro."""
+    gravity (the accelerometer's mean direction), not the z axis, so that an IMU mounted on
+    its side (the Husky's) is judged by its real yaw rate; the course's turns regressed on the
+    gyro's over every window, so that the course's noise costs no bias (a median of ratios
+    over the windows the course says turn read a fine gyro at 0.67 on fixes jittering a
+    metre); and only where the two turn alike (:data:`MIN_LAG_CORRELATION`: a course drawn by
+    two receivers interleaved on one topic turns at every fix). A gyro in mrad/s or scaled
+    by ten dead-reckoned monaco's tunnel 951 and 1639 m off while the run spoke of refused
+    fixes and matches and a forward accelerometer bias of 150-230 mg, never of the gyro."""
     imu = log.imu
     if not np.all(np.any(imu.gyro, axis=0)):
         return False  # a dead gyro or axis: named by _imu_alive
@@ -778,7 +783,10 @@ def _gyro_scale(path: Path, log: Log, t0: F64, t1: F64, turn: F64, warnings: lis
     yaw_rate = imu.gyro @ (up / max(float(np.linalg.norm(up)), 1e-9))
     heading = np.r_[0.0, np.cumsum(0.5 * (yaw_rate[1:] + yaw_rate[:-1]) * np.diff(imu.t))]
     turned = np.interp(t1, imu.t, heading) - np.interp(t0, imu.t, heading)
-    scale = abs(float(np.median(turned / turn)))
+    alike = _correlations(turned[None, :], turn, np.ones((1, len(turn)), bool))[0]
+    if not abs(alike) >= MIN_LAG_CORRELATION:
+        return True  # the course's turns are not the gyro's shape: a scale says nothing
+    scale = abs(float(turned @ turned) / float(turned @ turn))
     if GYRO_SCALE_OK[0] <= scale <= GYRO_SCALE_OK[1]:
         return True
     if MRAD_S_RATIO[0] <= scale <= MRAD_S_RATIO[1]:
@@ -789,7 +797,8 @@ def _gyro_scale(path: Path, log: Log, t0: F64, t1: F64, turn: F64, warnings: lis
         cause = "angular rates scaled wrong (raw counts, a wrong full-scale range)"
     warnings.append(
         f"{path.name}: IMU {topic_of(log, 'imu')}: its heading about gravity turns {scale:.3g} "
-        f"times the GNSS course over {len(turn)} turning windows (1 within a few per cent when "
+        f"times the GNSS course over {len(turn)} windows of {TURN_STEPS} s (1 within a few per "
+        "cent when "
         f"right): looks like {cause}; every outage is dead-reckoned with the heading wrong"
     )
     return False

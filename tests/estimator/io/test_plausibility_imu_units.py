@@ -91,3 +91,17 @@ def test_a_gyro_on_its_side_is_judged_about_gravity() -> None:
         if "about gravity" in w
     ]
     assert float(line.split("turns ")[1].split(" times")[0]) == pytest.approx(10.0, rel=0.05)
+
+
+@pytest.mark.parametrize("apart_m", [1.0, 3.0])
+def test_a_jittering_course_does_not_make_a_fine_gyro_look_scaled(apart_m: float) -> None:
+    """Two receivers interleaved on one topic, ``apart_m`` apart: the course turns at every
+    fix. A median of ratios over the windows it says turn read the gyro at 0.67 (1 m) and
+    0.0002 (3 m) and named it; regressed on the gyro's turns, and judged only where the two
+    turn alike, it says nothing."""
+    log = _monaco()
+    g = log.gnss
+    lon = g.lon.copy()
+    lon[::2] += apart_m / (111_320.0 * np.cos(np.radians(g.lat[::2])))
+    jittering = dataclasses.replace(log, gnss=dataclasses.replace(g, lon=lon))
+    assert not [w for w in checked(MONACO, jittering).warnings if "about gravity" in w]
