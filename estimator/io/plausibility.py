@@ -612,10 +612,11 @@ def _mean_over(t: F64, v: F64, t0: F64, t1: F64) -> F64:
 
 @dataclasses.dataclass(frozen=True)
 class _LagPeak:
-    """The shift (s, + the IMU's turns later than the GNSS course's) at which the gyro's turns
-    correlate best with the GNSS course's on a grid of shifts, either way round (a yaw rate of
-    the opposite sign correlates as well, negatively), against the best one further than
-    :data:`LAG_PEAK_WINDOW_S` from it."""
+    """The shift (s) at which one stream's signal correlates best with another's on a grid of
+    shifts, either way round (a yaw rate of the opposite sign correlates as well, negatively),
+    against the best one further than :data:`LAG_PEAK_WINDOW_S` from it: the gyro's turns
+    against the GNSS course's (+ the IMU's later, :func:`_gyro`), the wheel speed's changes
+    against the IMU's specific force (+ the wheels' later, :func:`_wheel_lag`)."""
 
     shift: float
     correlation: float
@@ -666,6 +667,23 @@ class _LagPeak:
         )
 
 
+def _coarse_shifts() -> F64:
+    """The grid an offset between two clocks is searched on first: :data:`LAG_COARSE_STEP_S`
+    apart within :data:`MAX_LAG_S`."""
+    n = round(MAX_LAG_S / LAG_COARSE_STEP_S)
+    out: F64 = LAG_COARSE_STEP_S * np.arange(-n, n + 1, dtype=np.float64)
+    return out
+
+
+def _fine_shifts(at: float) -> F64:
+    """The grid it is measured on then: :data:`LAG_STEP_S` apart, over a coarse step either
+    side of the best coarse shift ``at``."""
+    n = int(LAG_COARSE_STEP_S / LAG_STEP_S)
+    fine = at + LAG_STEP_S * np.arange(-n, n + 1, dtype=np.float64)
+    out: F64 = fine[np.abs(fine) <= MAX_LAG_S]
+    return out
+
+
 def _gyro(path: Path, log: Log, m: _GnssMotion, warnings: list[str]) -> bool:
     """The gyro's units, scale and sign, and the offset of the GNSS clock against the IMU's,
     from its turns against the GNSS course's over :data:`TURN_STEPS` s windows; False when its
@@ -705,8 +723,7 @@ def _gyro(path: Path, log: Log, m: _GnssMotion, warnings: list[str]) -> bool:
             out[k : k + 64] = np.where(enough, _correlations(g, turn, inside), np.nan)
         return out
 
-    n = round(MAX_LAG_S / LAG_COARSE_STEP_S)
-    coarse = LAG_COARSE_STEP_S * np.arange(-n, n + 1, dtype=np.float64)
+    coarse = _coarse_shifts()
     every = np.ones(len(turn), bool)
     peak = _LagPeak.of(coarse, correlations(coarse, every))
     at = peak.shift if peak is not None and (peak.clear or peak.ambiguous) else 0.0
@@ -744,8 +761,7 @@ def _gyro(path: Path, log: Log, m: _GnssMotion, warnings: list[str]) -> bool:
     if not peak.clear:
         return scale_ok
     inliers = inside[0] & (np.abs(turn - g / ratio) < TURN_OUTLIER_RAD)
-    fine = at + LAG_STEP_S * np.arange(-12, 13, dtype=np.float64)
-    fine = fine[np.abs(fine) <= MAX_LAG_S]
+    fine = _fine_shifts(at)
     corr = correlations(fine, inliers)
     if np.all(np.isnan(corr)):
         return scale_ok
