@@ -82,6 +82,23 @@ class TopicInfo:
 
 
 @dataclass(frozen=True)
+class ClockOffset:
+    """A stream's clock offset against the IMU's, measured when the log was read (its turns or
+    its speed's changes against the IMU's, :mod:`estimator.io.plausibility`): the value of
+    ``setting`` that puts it on the IMU's clock. Kept with the log, because only a run knows
+    the configuration: the line the load printed for the default setting must go once the
+    user has set it, and a setting the log contradicts must be named."""
+
+    setting: str
+    """``sensors.gnss_time_offset_s`` or ``sensors.wheel_time_offset_s``"""
+    offset_s: float
+    stream: str
+    """the stream and its topic, as a warning names it (``GNSS /gnss/fix``)"""
+    warning: str = ""
+    """the load's line for the default setting (0 s), or "" when that is within tolerance"""
+
+
+@dataclass(frozen=True)
 class Log:
     """One decoded log. Immutable; the estimator never changes it."""
 
@@ -92,6 +109,7 @@ class Log:
     truth: TruthData | None = None
     topics: tuple[TopicInfo, ...] = ()
     warnings: tuple[str, ...] = field(default=())
+    clock_offsets: tuple[ClockOffset, ...] = ()
 
     @property
     def t_start(self) -> float:

@@ -18,9 +18,17 @@ from typing import Any
 import numpy as np
 
 from estimator.io.topics import TopicChoice
-from estimator.log import GnssData, ImuData, Log, TopicInfo, TruthData, WheelData
+from estimator.log import (
+    ClockOffset,
+    GnssData,
+    ImuData,
+    Log,
+    TopicInfo,
+    TruthData,
+    WheelData,
+)
 
-CACHE_VERSION = 16
+CACHE_VERSION = 17
 """5: logs whose IMU and GNSS share no time are refused (they were cached as decoded); 7: a
 warning naming the log's file is stored without the name (:func:`_stored_warning`); 8: fixes
 far from the bulk of a log's are left out, streams on another clock than the IMU's named; 10:
@@ -29,7 +37,8 @@ repeats of a fix a receiver held while the vehicle drove on; 12: an IMU without 
 is refused, a gyro or axis reading zero named; 13: an offset of the GNSS clock against the
 IMU's is measured up to a minute (it was up to 1 s); 14: a gyro scaled wrong is named; 15: a
 receiver's clock stepping back over 1 s and 5 fix intervals is mended; 16: an offset of the
-wheel stream's clock against the IMU's is named"""
+wheel stream's clock against the IMU's is named; 17: the clock offsets are kept as measured
+(:class:`~estimator.log.ClockOffset`)"""
 CACHE_MAX_BYTES = 2_000_000_000
 """Least recently used cache entries are removed beyond this total size."""
 
@@ -152,6 +161,10 @@ def _to_npz(log: Log) -> dict[str, Any]:
     meta = {
         "topics": [dataclasses.asdict(t) for t in log.topics],
         "warnings": [_stored_warning(w, name) for w in log.warnings],
+        "clock_offsets": [
+            {**dataclasses.asdict(o), "warning": _stored_warning(o.warning, name)}
+            for o in log.clock_offsets
+        ],
     }
     arrays["meta"] = np.array(json.dumps(meta))
     return arrays
@@ -173,6 +186,10 @@ def _from_npz(path: Path, data: Any) -> Log:
         part("truth", TruthData),
         tuple(TopicInfo(**t) for t in meta["topics"]),
         tuple(_told_warning(w, path.name) for w in meta["warnings"]),
+        tuple(
+            ClockOffset(**{**o, "warning": _told_warning(o["warning"], path.name)})
+            for o in meta["clock_offsets"]
+        ),
     )
 
 

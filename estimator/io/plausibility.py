@@ -17,13 +17,14 @@ from __future__ import annotations
 
 import dataclasses
 import math
+from collections.abc import Mapping
 from pathlib import Path
 
 import numpy as np
 from numpy.typing import NDArray
 
 from estimator.errors import LogError, named_and_summed
-from estimator.log import GnssData, Log, wheel_gap_s
+from estimator.log import ClockOffset, GnssData, Log, wheel_gap_s
 from estimator.nav.earth import great_circle_m
 from estimator.nav.frames import LocalFrame
 
@@ -176,6 +177,7 @@ def checked(path: Path, log: Log) -> Log:
     left out, fixes with a kilometre of variance made no fixes); refused when no estimate can
     be meaningful."""
     warnings: list[str] = []
+    offsets: list[ClockOffset] = []
     _imu_rate(path, log)
     log = _on_the_imu_clock(path, log, warnings)
     gyro_alive = _imu_alive(path, log, warnings)
@@ -186,10 +188,10 @@ def checked(path: Path, log: Log) -> Log:
     log = dataclasses.replace(log, gnss=gnss)
     motion = _gnss_motion(log)
     if motion is not None:
-        gyro_alive &= _gyro(path, log, motion, warnings)
+        gyro_alive &= _gyro(path, log, motion, warnings, offsets)
         if log.wheel is not None and not _wheel_plausible(log, motion, warnings):
             log = dataclasses.replace(log, wheel=None)
-    wheel_lag = _wheel_lag(path, log, warnings) if log.wheel is not None else 0.0
+    wheel_lag = _wheel_lag(path, log, warnings, offsets) if log.wheel is not None else 0.0
     if gyro_alive:
         # judged against the wheels put on the IMU's clock: 45 s early, they made monaco's
         # GNSS clock step 3.8 s
@@ -199,9 +201,44 @@ def checked(path: Path, log: Log) -> Log:
                 log, wheel=dataclasses.replace(log.wheel, t=log.wheel.t - wheel_lag)
             )
         log = dataclasses.replace(log, gnss=_clock_step(path, judged, warnings))
+    if offsets:
+        log = dataclasses.replace(log, clock_offsets=(*log.clock_offsets, *offsets))
     if not warnings:
         return log
     return dataclasses.replace(log, warnings=(*log.warnings, *warnings))
+
+
+CLOCK_SETTING_TOLERANCE_S = LAG_WARN_S
+"""A configured clock offset within this of the one measured is taken as that one: an offset
+this small is not named when nothing is configured either (:data:`LAG_WARN_S`,
+:data:`WHEEL_LAG_WARN_S`)."""
+
+
+def configured_clock_warnings(log: Log, configured: Mapping[str, float]) -> tuple[str, ...]:
+    """The log's warnings for a run with the clock offsets ``configured`` (setting -> s): the
+    load's line for an offset the run is set to correct is dropped (it read "set X = v" after
+    the user had), and a setting the measured offset contradicts is named (a configured 1.5 s
+    on a log whose clocks agree went unsaid)."""
+    out = [w for w in log.warnings if w not in {o.warning for o in log.clock_offsets}]
+    for o in log.clock_offsets:
+        setting = configured.get(o.setting, 0.0)
+        if abs(setting - o.offset_s) < CLOCK_SETTING_TOLERANCE_S:
+            continue
+        if setting == 0.0 and o.warning:
+            out.append(o.warning)
+            continue
+        agrees = abs(o.offset_s) < CLOCK_SETTING_TOLERANCE_S
+        measured = (
+            f"agrees with the IMU's ({o.offset_s:+.2f} s as measured)"
+            if agrees
+            else f"is {o.offset_s:+.2f} s off the IMU's as measured"
+        )
+        out.append(
+            f"{Path(log.path).name}: {o.stream}: its clock {measured}, where the run is "
+            f"configured with {o.setting} = {setting:.2f}: set {o.setting} = "
+            f"{0.0 if agrees else o.offset_s:.2f}"
+        )
+    return tuple(out)
 
 
 def in_bulk(lat: F64, lon: F64) -> NDArray[np.bool_]:
@@ -716,7 +753,9 @@ def _fine_shifts(at: float) -> F64:
     return out
 
 
-def _gyro(path: Path, log: Log, m: _GnssMotion, warnings: list[str]) -> bool:
+def _gyro(
+    path: Path, log: Log, m: _GnssMotion, warnings: list[str], offsets: list[ClockOffset]
+) -> bool:
     """The gyro's units, scale and sign, and the offset of the GNSS clock against the IMU's,
     from its turns against the GNSS course's over :data:`TURN_STEPS` s windows; False when its
     scale is wrong (:func:`_gyro_scale`), so that no other check dead-reckons with it. The
@@ -800,16 +839,21 @@ def _gyro(path: Path, log: Log, m: _GnssMotion, warnings: list[str]) -> bool:
         return scale_ok
     best = int(np.nanargmax(corr))
     lag = float(fine[best])
-    if corr[best] >= MIN_LAG_CORRELATION and abs(lag) >= LAG_WARN_S:
+    if corr[best] < MIN_LAG_CORRELATION:
+        return scale_ok
+    line = ""
+    if abs(lag) >= LAG_WARN_S:
         late = "late" if lag > 0 else "early"
         utc = ""
         if abs(abs(lag) - GPS_UTC_S) < 0.5:
             utc = f"; {GPS_UTC_S:g} s is GPS time against UTC"
-        warnings.append(
+        line = (
             f"{path.name}: {imu}: its stamps look {abs(lag):.2f} s {late} against {gnss} (its "
             f"turns match the GNSS course's best shifted by {lag:+.2f} s, correlation "
             f"{corr[best]:.2f}{utc}): set sensors.gnss_time_offset_s = {lag:.2f}"
         )
+        warnings.append(line)
+    offsets.append(ClockOffset("sensors.gnss_time_offset_s", round(lag, 2), gnss, line))
     return scale_ok
 
 
@@ -886,7 +930,7 @@ def _wheel_plausible(log: Log, m: _GnssMotion, warnings: list[str]) -> bool:
     return False
 
 
-def _wheel_lag(path: Path, log: Log, warnings: list[str]) -> float:
+def _wheel_lag(path: Path, log: Log, warnings: list[str], offsets: list[ClockOffset]) -> float:
     """Name an offset of the wheel stream's clock against the IMU's, with the setting that
     removes it: the change of the wheel speed's mean over abutting :data:`WHEEL_LAG_WINDOW_S`
     windows against the IMU's horizontal specific force over the same windows shifted, fitted
@@ -959,16 +1003,21 @@ def _wheel_lag(path: Path, log: Log, warnings: list[str]) -> float:
         return 0.0
     best = int(np.nanargmax(corr))
     lag = float(fine[best])
-    if corr[best] < MIN_LAG_CORRELATION or abs(lag) < WHEEL_LAG_WARN_S:
+    if corr[best] < MIN_LAG_CORRELATION:
         return 0.0
-    warnings.append(
-        f"{path.name}: wheel {topic_of(log, 'wheel')}: its stamps look {abs(lag):.2f} s "
-        f"{'late' if lag > 0 else 'early'} against IMU {topic_of(log, 'imu')} (its speed's "
-        f"changes match the IMU's specific force {abs(lag):.2f} s "
-        f"{'before' if lag > 0 else 'after'} their stamps, correlation {corr[best]:.2f}): set "
-        f"sensors.wheel_time_offset_s = {-lag:.2f}"
-    )
-    return lag
+    wheel = f"wheel {topic_of(log, 'wheel')}"
+    line = ""
+    if abs(lag) >= WHEEL_LAG_WARN_S:
+        line = (
+            f"{path.name}: {wheel}: its stamps look {abs(lag):.2f} s "
+            f"{'late' if lag > 0 else 'early'} against IMU {topic_of(log, 'imu')} (its speed's "
+            f"changes match the IMU's specific force {abs(lag):.2f} s "
+            f"{'before' if lag > 0 else 'after'} their stamps, correlation {corr[best]:.2f}): "
+            f"set sensors.wheel_time_offset_s = {-lag:.2f}"
+        )
+        warnings.append(line)
+    offsets.append(ClockOffset("sensors.wheel_time_offset_s", round(-lag, 2), wheel, line))
+    return lag if line else 0.0
 
 
 def _without_hole(t: F64, hole_s: float, t0: F64, t1: F64) -> NDArray[np.bool_]:

@@ -88,7 +88,7 @@ from estimator.filter.updates import (
     pseudo_position_update,
     turn_map_bias,
 )
-from estimator.io.plausibility import GRAVITY
+from estimator.io.plausibility import GRAVITY, configured_clock_warnings
 from estimator.log import Log
 from estimator.matching import (
     MatchGeometry,
@@ -208,7 +208,13 @@ def run(
         t0=log.t_start,
         dropped_fix_times=tuple(driver.dropped_fixes),
         exits=exits,
-        warnings=tuple(log.warnings)
+        warnings=configured_clock_warnings(
+            log,
+            {
+                "sensors.gnss_time_offset_s": p.sensors.gnss_time_offset_s,
+                "sensors.wheel_time_offset_s": p.sensors.wheel_time_offset_s,
+            },
+        )
         + inputs.warnings
         + (route.warnings if route is not None else ())
         + gnss_acceptance_warnings(log, epochs, inputs.degraded)
