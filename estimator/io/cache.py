@@ -20,7 +20,7 @@ import numpy as np
 from estimator.io.topics import TopicChoice
 from estimator.log import GnssData, ImuData, Log, TopicInfo, TruthData, WheelData
 
-CACHE_VERSION = 15
+CACHE_VERSION = 16
 """5: logs whose IMU and GNSS share no time are refused (they were cached as decoded); 7: a
 warning naming the log's file is stored without the name (:func:`_stored_warning`); 8: fixes
 far from the bulk of a log's are left out, streams on another clock than the IMU's named; 10:
@@ -28,7 +28,8 @@ the fixes after a step of the GNSS clock under a minute are left out; 11: so are
 repeats of a fix a receiver held while the vehicle drove on; 12: an IMU without accelerations
 is refused, a gyro or axis reading zero named; 13: an offset of the GNSS clock against the
 IMU's is measured up to a minute (it was up to 1 s); 14: a gyro scaled wrong is named; 15: the
-clock-step check judges the wheels on the GNSS speed's scale"""
+clock-step check judges the wheels on the GNSS speed's scale; 16: a jump of the fixes that
+stays is named, the fixes before it left out when their variance says the receiver coasted"""
 CACHE_MAX_BYTES = 2_000_000_000
 """Least recently used cache entries are removed beyond this total size."""
 
