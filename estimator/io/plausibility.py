@@ -17,7 +17,7 @@ from __future__ import annotations
 
 import dataclasses
 import math
-from collections.abc import Mapping
+from collections.abc import Callable, Mapping
 from pathlib import Path
 
 import numpy as np
@@ -147,6 +147,27 @@ HELD_FIX_MOVED_M_S = 2.0
 """The repeats are a held fix, not a vehicle standing, when the first fix after them lies this
 far per second of their span from the position held (the vehicle drove on; one in static hold
 starts near it), or, with no fix after them, the wheels drove that far."""
+WHEEL_SCALE_RESCALED = 0.03
+"""The clock-step and coasting checks put the wheels on the GNSS speed's scale when their
+median ratio to it is off 1 by more than this: a scale the checks' tolerance
+(:data:`CLOCK_STEP_DRIFT`) does not hold. Within it the ratio is the fixes' noise as much as
+the wheels' (the corpus drive's 29 pairs: 1.002, their 10-90 % 0.97-1.05)."""
+COAST_JUMP_M = 30.0
+"""Two consecutive valid fixes, no gap between them, farther apart than this (m) beyond what
+the wheels drove between them are a jump of the fix stream; it is named when it stays (the
+fixes :data:`COAST_SIDE_S` either side of it agree with the wheels among themselves, within
+:data:`CLOCK_STEP_NOISE_M`, and disagree across it by this much): a receiver that coasted
+through an outage on its own dead reckoning, its status valid and its sigma small, and
+re-acquired. The samples' and the stress drives' largest jumps are 7-14 m (re-acquisition at
+a portal), comma2k19's and the Husky's 1 m; a 27 m multipath fix comes back at the next."""
+COAST_SIDE_S = 3.0
+COAST_SIGMA_RISE = 1.5
+"""A receiver dead-reckoning says so, when it does, by its variance: the fixes up to a jump
+over which the horizontal variance grew steadily (never falling from one fix to the next) by
+this factor or more, and over the fixes up to :data:`COAST_SKY_S` after it, the sky back, is
+this factor below the jump's, are its coasting, left out of the run. Without it the fixes are
+named and kept: which side of the jump is wrong, and since when, the fixes do not say."""
+COAST_SKY_S = 10.0
 MIN_IMU_INTERVAL_S = 1e-4
 """A median IMU interval below this (over 10 kHz; vehicle IMUs run at up to a few hundred
 Hz) is stamps on another time scale: a 75 s drive squeezed into milliseconds."""
@@ -186,6 +207,7 @@ def checked(path: Path, log: Log) -> Log:
     log = dataclasses.replace(log, gnss=_held_fixes(path, log, warnings))
     gnss = _variances(log, warnings)
     log = dataclasses.replace(log, gnss=gnss)
+    log = dataclasses.replace(log, gnss=_coasting_fixes(path, log, warnings))
     motion = _gnss_motion(log)
     if motion is not None:
         gyro_alive &= _gyro(path, log, motion, warnings, offsets)
@@ -343,6 +365,130 @@ def _held_fixes(path: Path, log: Log, warnings: list[str]) -> GnssData:
     return dataclasses.replace(g, status=status)
 
 
+def _coasting_fixes(path: Path, log: Log, warnings: list[str]) -> GnssData:
+    """Name a jump of the fix stream that stays (:data:`COAST_JUMP_M`); leave the fixes before
+    it out when the receiver's own variance says it coasted there (:data:`COAST_SIGMA_RISE`).
+    Some receivers go on through a tunnel on their own dead reckoning with a valid status:
+    there was no outage, so no route update, and the filter followed their drift; monaco's
+    tunnel so coasting (3 % and 0.1 deg/s) ran 71 m RMS off, the long tunnel 1094 m, with not
+    one warning. Only the jump when the sky comes back shows it: 148 m and 2436 m in 0.2 s."""
+    g = log.gnss
+    ok = np.flatnonzero(g.valid)
+    if log.wheel is None or len(ok) < 10:
+        return g
+    t = g.t[ok]
+    dt = np.diff(t)
+    unbroken = dt <= max(CLOCK_STEP_GAP_S, CLOCK_STEP_GAP_INTERVALS * float(np.median(dt)))
+    xy = LocalFrame.at(g.lat[ok], g.lon[ok], g.alt[ok]).to_enu(g.lat[ok], g.lon[ok])[:, :2]
+    judged = _wheels_on_the_gnss_scale(log)
+    w = judged.wheel
+    assert w is not None
+    driven = np.r_[0.0, np.cumsum(0.5 * np.abs(w.speed[1:] + w.speed[:-1]) * np.diff(w.t))]
+    at = np.interp(t, w.t, driven)
+    jump = np.linalg.norm(np.diff(xy, axis=0), axis=1) - np.diff(at)
+    var = g.cov_enu[ok, 0] + g.cov_enu[ok, 1]
+    status = g.status
+    rel = g.t - log.t_start
+    for c in np.flatnonzero(unbroken & (jump > COAST_JUMP_M))[:10]:
+        if not _stays(judged, t, xy, int(c)):
+            continue
+        head = (
+            f"{path.name}: GNSS {topic_of(log, 'gnss')}: its fixes jump "
+            f"{jump[c] + at[c + 1] - at[c]:.0f} m from {rel[ok[c]]:.1f} to "
+            f"{rel[ok[c + 1]]:.1f} s, where the wheels drove {at[c + 1] - at[c]:.1f} m, and "
+            "stay there (the wheels and the gyro agree with the fixes either side of it): "
+        )
+        first = _coast_onset(t, var, int(c), unbroken)
+        if first is not None:
+            warnings.append(
+                head + f"their variance grew steadily from {rel[ok[first]]:.1f} s (a sigma of "
+                f"{math.sqrt(var[first] / 2):.2f} m) to the jump ({math.sqrt(var[c] / 2):.2f} "
+                "m) and fell back after it, a receiver coasting on its own dead reckoning with a "
+                f"valid status (through a tunnel?); the {c + 1 - first} fixes stamped "
+                f"{rel[ok[first]]:.1f}-{rel[ok[c]]:.1f} s are left out of the run, which takes "
+                "them as an outage"
+            )
+            status = status.copy()
+            status[ok[first : c + 1]] = -1
+            continue
+        said = f"{math.sqrt(var[c] / 2):.2f} m" if np.isfinite(var[c]) else "unknown"
+        warnings.append(
+            head + f"the fixes before it (their status valid, their sigma {said}) were off by "
+            "that much, a receiver coasting on its own dead reckoning (through a tunnel?) and "
+            "re-acquiring, or those after it are (a step: another datum or base station). The "
+            "run takes them as fixes, with no outage there; if the receiver coasted, give the "
+            f"span it did as an outage (--outage START:{rel[ok[c]]:.1f})"
+        )
+    return g if status is g.status else dataclasses.replace(g, status=status)
+
+
+def _coast_onset(t: F64, var: F64, c: int, unbroken: NDArray[np.bool_]) -> int | None:
+    """The first fix of the run up to ``c`` over which the fixes' horizontal variance ``var``
+    grew steadily to :data:`COAST_SIGMA_RISE` times its first value or more, when the fixes
+    up to :data:`COAST_SKY_S` after the jump following ``c`` fall back below the jump's by the
+    same factor: a receiver saying, by its variance, that it coasted. None otherwise."""
+    if not np.isfinite(var[c]):
+        return None
+    first = c
+    while first > 0 and unbroken[first - 1] and var[first - 1] <= var[first]:
+        first -= 1
+    sky = var[(t > t[c]) & (t <= t[c + 1] + COAST_SKY_S)]
+    if var[c] < COAST_SIGMA_RISE * var[first] or not np.all(
+        np.isfinite(sky) & (COAST_SIGMA_RISE * sky <= var[c])
+    ):
+        return None
+    return first
+
+
+def _stays(log: Log, t: F64, xy: F64, c: int) -> bool:
+    """Whether the jump of the fixes after valid fix ``c`` (stamps ``t``, positions ``xy``)
+    stays: the dead-reckoned track, laid on the fixes :data:`COAST_SIDE_S` either side of it
+    (turned and moved onto them in the plane), passes within :data:`CLOCK_STEP_NOISE_M` of
+    each side's fixes, and the track laid on those before it misses those after it by
+    :data:`COAST_JUMP_M` or more. A fix that jumped and came back, or noise, does not stay. In
+    the plane, not by distances alone: a coasting receiver's error along the road cancels in a
+    pair's distance at some separation."""
+    before = np.flatnonzero((t >= t[c] - COAST_SIDE_S) & (t <= t[c]))
+    after = np.flatnonzero((t > t[c]) & (t <= t[c + 1] + COAST_SIDE_S))
+    dr = _DeadReckoning.over(log, float(t[before[0]]), float(t[after[-1]]))
+    if dr is None:
+        return False
+    p, driven, inside = dr.at(t)
+    before, after = before[inside[before]], after[inside[after]]
+    if len(before) < 3 or len(after) < 3:
+        return False
+    if min(driven[before[-1]] - driven[before[0]], driven[after[-1]] - driven[after[0]]) < (
+        COAST_SIDE_S * MOVING_M_S
+    ):
+        return False  # too little track either side to turn it onto the fixes
+    on_before = _laid_on(p[before], xy[before])
+    on_after = _laid_on(p[after], xy[after])
+
+    def off(fixes: NDArray[np.intp], laid: Callable[[F64], F64]) -> float:
+        return float(np.median(np.linalg.norm(xy[fixes] - laid(p[fixes]), axis=1)))
+
+    return (
+        off(before, on_before) <= CLOCK_STEP_NOISE_M
+        and off(after, on_after) <= CLOCK_STEP_NOISE_M
+        and off(after, on_before) >= COAST_JUMP_M
+    )
+
+
+def _laid_on(track: F64, fixes: F64) -> Callable[[F64], F64]:
+    """The rigid motion of the plane (a turn and a shift) taking the dead-reckoned points
+    ``track`` closest to ``fixes`` (least squares), as a function of points."""
+    mt, mf = track.mean(axis=0), fixes.mean(axis=0)
+    h = (track - mt).T @ (fixes - mf)
+    angle = float(np.arctan2(h[0, 1] - h[1, 0], h[0, 0] + h[1, 1]))
+    rot = np.array([[np.cos(angle), -np.sin(angle)], [np.sin(angle), np.cos(angle)]])
+
+    def laid(points: F64) -> F64:
+        out: F64 = (points - mt) @ rot.T + mf
+        return out
+
+    return laid
+
+
 def _wheel_distance(log: Log, t0: float, t1: float) -> float:
     """The distance the wheels say was driven from ``t0`` to ``t1`` (s, log stamps)."""
     w = log.wheel
@@ -492,8 +638,9 @@ def _clock_step(path: Path, log: Log, warnings: list[str]) -> GnssData:
     if not len(gaps):
         return g
     xy = LocalFrame.at(g.lat[ok], g.lon[ok], g.alt[ok]).to_enu(g.lat[ok], g.lon[ok])[:, :2]
+    judged = _wheels_on_the_gnss_scale(log)
     for a in gaps:
-        shift = _step_at(log, t, xy, int(a))
+        shift = _step_at(judged, t, xy, int(a))
         if shift is None:
             continue
         rel = g.t - log.t_start
@@ -510,6 +657,29 @@ def _clock_step(path: Path, log: Log, warnings: list[str]) -> GnssData:
         status[after] = -1
         return dataclasses.replace(g, status=status)
     return g
+
+
+def _wheels_on_the_gnss_scale(log: Log) -> Log:
+    """``log`` with its wheel speed divided by its median ratio to the GNSS speed while moving
+    (within :data:`WHEEL_RATIO_OK`: a wheel radius or a tyre off by up to a quarter, which the
+    filter estimates as a state), when that ratio is off 1 by more than
+    :data:`WHEEL_SCALE_RESCALED`. The clock-step check dead-reckons with the wheels over up to
+    two minutes and more: uncorrected, monaco's wheels reading 15 % fast (a tyre, a radius
+    configured wrong) made its tunnel's 1600 m look 20.7 s too short, named as a GNSS clock
+    step, and every fix after the tunnel was left out."""
+    w, m = log.wheel, _gnss_motion(log)
+    if w is None or m is None:
+        return log
+    sel = m.moving & (m.t >= w.t[0]) & (m.t <= w.t[-1])
+    if np.count_nonzero(sel) < MIN_WHEEL_PAIRS:
+        return log
+    ws = _mean_over(w.t, w.speed, m.t[sel] - m.dt[sel] / 2, m.t[sel] + m.dt[sel] / 2)
+    ratio = float(np.median(ws / m.speed[sel]))
+    if abs(ratio - 1.0) <= WHEEL_SCALE_RESCALED or not (
+        WHEEL_RATIO_OK[0] <= ratio <= WHEEL_RATIO_OK[1]
+    ):
+        return log
+    return dataclasses.replace(log, wheel=dataclasses.replace(w, speed=w.speed / ratio))
 
 
 def _step_at(log: Log, t: F64, xy: F64, a: int) -> float | None:
