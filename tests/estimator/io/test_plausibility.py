@@ -31,8 +31,6 @@ from estimator.pipeline import open_inputs, run
 from estimator.sim import Simulation, simulate
 
 REPO = Path(__file__).resolve().parents[3]
-SAMPLES = sorted((REPO / "sample_logs").glob("*.mcap"))
-REAL_LOGS = ("comma2k19/i280.mcap", "robot_localization/test1.bag")
 STEP_WORDS = "its clock steps"
 
 
@@ -134,20 +132,6 @@ def test_the_clean_drive_is_not_named_and_its_fixes_untouched(tmp_path: Path) ->
     log = load_log(path, cache_dir=tmp_path / "cache")
     assert not _named(log)
     assert np.array_equal(log.gnss.status, sim.gnss.status)
-
-
-@pytest.mark.parametrize("sample", SAMPLES, ids=lambda p: p.name)
-def test_no_bundled_sample_is_named(tmp_path: Path, sample: Path) -> None:
-    """Their tunnels (63-356 s without a fix) are real outages."""
-    assert not _named(load_log(sample, cache_dir=tmp_path / "cache"))
-
-
-@pytest.mark.parametrize("name", REAL_LOGS)
-def test_no_real_log_is_named(tmp_path: Path, shared_data: Path, name: str) -> None:
-    path = shared_data / name
-    if not path.exists():
-        pytest.skip(f"real data not found: {path}")
-    assert not _named(load_log(path, cache_dir=tmp_path / "cache"))
 
 
 T0 = 1_700_000_000.0
@@ -312,19 +296,6 @@ def test_the_recommended_setting_gives_the_sample_its_clean_run_back(offset_s: f
 
     late = _gnss_late(inputs.log, offset_s)
     assert rmse(late, _setting(late)) < rmse(inputs.log, 0.0) + 0.3
-
-
-@pytest.mark.parametrize("sample", SAMPLES, ids=lambda p: p.name)
-def test_no_bundled_sample_names_an_offset(sample: Path) -> None:
-    assert not _offset_lines(load_log(sample, cache_dir=None))
-
-
-@pytest.mark.parametrize("name", REAL_LOGS)
-def test_no_real_log_names_an_offset(shared_data: Path, name: str) -> None:
-    path = shared_data / name
-    if not path.exists():
-        pytest.skip(f"real data not found: {path}")
-    assert not _offset_lines(load_log(path, cache_dir=None))
 
 
 def _laps(offset_s: float) -> Log:

@@ -24,8 +24,6 @@ from estimator.params import Params
 from estimator.pipeline import Inputs, open_inputs, run
 
 REPO = Path(__file__).resolve().parents[3]
-SAMPLES = sorted((REPO / "sample_logs").glob("*.mcap"))
-REAL_LOGS = ("comma2k19/i280.mcap", "robot_localization/test1.bag")
 JUMP_WORDS = "its fixes jump"
 R_EARTH = 6_378_137.0
 
@@ -175,21 +173,6 @@ def test_fixes_that_jump_and_come_back_are_not_named(tmp_path: Path, every: int)
     mask[k : k + (25 if every == 2 else 1) : every] = True
     _, warnings = _named(tmp_path / "m.mcap", dataclasses.replace(log, gnss=_moved(g, mask, 60.0)))
     assert not warnings
-
-
-@pytest.mark.parametrize("sample", SAMPLES, ids=lambda p: p.stem)
-def test_no_bundled_sample_is_named(tmp_path: Path, sample: Path) -> None:
-    log = load_log(sample, cache_dir=tmp_path / "cache")
-    assert not [w for w in log.warnings if JUMP_WORDS in w]
-
-
-@pytest.mark.parametrize("name", REAL_LOGS)
-def test_no_real_log_is_named(tmp_path: Path, shared_data: Path, name: str) -> None:
-    path = shared_data / name
-    if not path.exists():
-        pytest.skip(f"real data not found: {path}")
-    log = load_log(path, cache_dir=tmp_path / "cache")
-    assert not [w for w in log.warnings if JUMP_WORDS in w]
 
 
 @pytest.mark.parametrize("index", range(5))
