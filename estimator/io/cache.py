@@ -28,7 +28,7 @@ from estimator.log import (
     WheelData,
 )
 
-CACHE_VERSION = 18
+CACHE_VERSION = 19
 """5: logs whose IMU and GNSS share no time are refused (they were cached as decoded); 7: a
 warning naming the log's file is stored without the name (:func:`_stored_warning`); 8: fixes
 far from the bulk of a log's are left out, streams on another clock than the IMU's named; 10:
@@ -40,7 +40,7 @@ receiver's clock stepping back over 1 s and 5 fix intervals is mended; 16: an of
 wheel stream's clock against the IMU's is named; 17: the clock offsets are kept as measured
 (:class:`~estimator.log.ClockOffset`); 18: the clock-step check judges the wheels on the GNSS
 speed's scale, and a jump of the fixes that stays is named (the fixes before it left out when
-their variance says the receiver coasted)"""
+their variance says the receiver coasted); 19: a wheel speed in coarse steps is named"""
 CACHE_MAX_BYTES = 2_000_000_000
 """Least recently used cache entries are removed beyond this total size."""
 
