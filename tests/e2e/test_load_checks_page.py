@@ -1,6 +1,7 @@
 """A log whose GNSS is stamped 18 s late (GPS time against UTC), in headless Chromium: the
 check at load names the offset and the setting that removes it where the user looks (the
-status line's warnings); set in the parameter file, the line is gone from the run."""
+status line's warnings). That the line goes once the setting is made is the run's
+(tests/estimator/io/test_plausibility_configured_clocks.py)."""
 
 from __future__ import annotations
 
