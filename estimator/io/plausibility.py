@@ -24,7 +24,7 @@ import numpy as np
 from numpy.typing import NDArray
 
 from estimator.errors import LogError, named_and_summed
-from estimator.log import ClockOffset, GnssData, Log, wheel_gap_s
+from estimator.log import ClockOffset, GnssData, Log, WheelData, wheel_gap_s
 from estimator.nav.earth import great_circle_m
 from estimator.nav.frames import LocalFrame
 
@@ -230,7 +230,7 @@ def checked(path: Path, log: Log) -> Log:
             judged = dataclasses.replace(
                 log, wheel=dataclasses.replace(log.wheel, t=log.wheel.t - wheel_lag)
             )
-        log = dataclasses.replace(log, gnss=_clock_step(path, judged, warnings))
+        log = dataclasses.replace(log, gnss=_clock_step(path, judged, warnings, motion))
     if offsets:
         log = dataclasses.replace(log, clock_offsets=(*log.clock_offsets, *offsets))
     if not warnings:
@@ -388,7 +388,7 @@ def _coasting_fixes(path: Path, log: Log, warnings: list[str]) -> GnssData:
     dt = np.diff(t)
     unbroken = dt <= max(CLOCK_STEP_GAP_S, CLOCK_STEP_GAP_INTERVALS * float(np.median(dt)))
     xy = LocalFrame.at(g.lat[ok], g.lon[ok], g.alt[ok]).to_enu(g.lat[ok], g.lon[ok])[:, :2]
-    judged = _wheels_on_the_gnss_scale(log)
+    judged = _wheels_on_the_gnss_scale(log, _gnss_motion(log))
     w = judged.wheel
     assert w is not None
     driven = np.r_[0.0, np.cumsum(0.5 * np.abs(w.speed[1:] + w.speed[:-1]) * np.diff(w.t))]
@@ -603,10 +603,8 @@ class _DeadReckoning:
             return None
         if np.max(np.diff(w.t[wk]), initial=0.0) > wheel_gap_s(w.t):
             return None
-        up = np.mean(imu.accel[k], axis=0)
-        yaw_rate = imu.gyro[k] @ (up / max(float(np.linalg.norm(up)), 1e-9))
+        heading = _running_integral(t, imu.gyro[k] @ _gravity_up(imu.accel[k]))
         dt = np.diff(t)
-        heading = np.r_[0.0, np.cumsum(0.5 * (yaw_rate[1:] + yaw_rate[:-1]) * dt)]
         speed = np.interp(t, w.t, w.speed)
         step = 0.5 * (speed[1:] + speed[:-1]) * dt
         mid = 0.5 * (heading[1:] + heading[:-1])
@@ -625,7 +623,7 @@ def _unit(angle: F64) -> F64:
     return out
 
 
-def _clock_step(path: Path, log: Log, warnings: list[str]) -> GnssData:
+def _clock_step(path: Path, log: Log, warnings: list[str], motion: _GnssMotion | None) -> GnssData:
     """The fixes with those after a step of the GNSS clock (under :data:`OTHER_CLOCK_S`:
     larger ones leave the fixes outside the IMU's span, :func:`_on_the_imu_clock`) made no
     fix, named in one line. A step shows at a gap between fixes (the stamps leaping forward
@@ -634,7 +632,8 @@ def _clock_step(path: Path, log: Log, warnings: list[str]) -> GnssData:
     and they are once the fixes after it are moved by the step. Without this the filter took
     every fix after a 20 s step at the wrong time, 300 m off, or a fake outage, in silence.
     The fixes are left out rather than moved back: the step is measured to a tenth of a second
-    against a dead-reckoning, whose error would go into every fix moved."""
+    against a dead-reckoning, whose error would go into every fix moved. ``motion``: the
+    fixes' (:func:`_gnss_motion`), which put the wheels on the GNSS speed's scale."""
     g = log.gnss
     ok = np.flatnonzero(g.valid)
     if log.wheel is None or len(ok) < 2:
@@ -646,7 +645,7 @@ def _clock_step(path: Path, log: Log, warnings: list[str]) -> GnssData:
     if not len(gaps):
         return g
     xy = LocalFrame.at(g.lat[ok], g.lon[ok], g.alt[ok]).to_enu(g.lat[ok], g.lon[ok])[:, :2]
-    judged = _wheels_on_the_gnss_scale(log)
+    judged = _wheels_on_the_gnss_scale(log, motion)
     for a in gaps:
         shift = _step_at(judged, t, xy, int(a))
         if shift is None:
@@ -667,7 +666,7 @@ def _clock_step(path: Path, log: Log, warnings: list[str]) -> GnssData:
     return g
 
 
-def _wheels_on_the_gnss_scale(log: Log) -> Log:
+def _wheels_on_the_gnss_scale(log: Log, m: _GnssMotion | None) -> Log:
     """``log`` with its wheel speed divided by its median ratio to the GNSS speed while moving
     (within :data:`WHEEL_RATIO_OK`: a wheel radius or a tyre off by up to a quarter, which the
     filter estimates as a state), when that ratio is off 1 by more than
@@ -675,16 +674,14 @@ def _wheels_on_the_gnss_scale(log: Log) -> Log:
     two minutes and more: uncorrected, monaco's wheels reading 15 % fast (a tyre, a radius
     configured wrong) made its tunnel's 1600 m look 20.7 s too short, named as a GNSS clock
     step, and every fix after the tunnel was left out."""
-    w, m = log.wheel, _gnss_motion(log)
+    w = log.wheel
     if w is None or m is None:
         return log
-    sel = m.moving & (m.t >= w.t[0]) & (m.t <= w.t[-1])
-    if np.count_nonzero(sel) < MIN_WHEEL_PAIRS:
-        return log
-    ws = _mean_over(w.t, w.speed, m.t[sel] - m.dt[sel] / 2, m.t[sel] + m.dt[sel] / 2)
-    ratio = float(np.median(ws / m.speed[sel]))
-    if abs(ratio - 1.0) <= WHEEL_SCALE_RESCALED or not (
-        WHEEL_RATIO_OK[0] <= ratio <= WHEEL_RATIO_OK[1]
+    ratio = _wheel_speed_ratio(w, m)
+    if (
+        ratio is None
+        or abs(ratio - 1.0) <= WHEEL_SCALE_RESCALED
+        or not (WHEEL_RATIO_OK[0] <= ratio <= WHEEL_RATIO_OK[1])
     ):
         return log
     return dataclasses.replace(log, wheel=dataclasses.replace(w, speed=w.speed / ratio))
@@ -851,7 +848,7 @@ def _gnss_motion(log: Log) -> _GnssMotion | None:
 
 def _mean_over(t: F64, v: F64, t0: F64, t1: F64) -> F64:
     """Mean of a sampled signal over each interval (its running integral's difference)."""
-    c = np.r_[0.0, np.cumsum(0.5 * (v[1:] + v[:-1]) * np.diff(t))]
+    c = _running_integral(t, v)
     width = np.maximum(t1 - t0, 1e-9)
     out: F64 = (np.interp(t1, t, c) - np.interp(t0, t, c)) / width
     return out
@@ -948,8 +945,7 @@ def _gyro(
     if np.sum(np.abs(turn)) < MIN_TURN_RAD or np.count_nonzero(turning) < 5:
         return True
     it = log.imu.t
-    yaw_rate = log.imu.gyro[:, 2]
-    heading = np.r_[0.0, np.cumsum(0.5 * (yaw_rate[1:] + yaw_rate[:-1]) * np.diff(it))]
+    heading = _running_integral(it, log.imu.gyro[:, 2])
 
     def imu_turn(shifts: F64) -> tuple[F64, NDArray[np.bool_]]:
         """The IMU's heading change over each window taken ``shift`` later (M, N), and which of
@@ -1049,9 +1045,7 @@ def _gyro_scale(path: Path, log: Log, t0: F64, t1: F64, turn: F64, warnings: lis
     imu = log.imu
     if not np.all(np.any(imu.gyro, axis=0)):
         return False  # a dead gyro or axis: named by _imu_alive
-    up = np.mean(imu.accel, axis=0)
-    yaw_rate = imu.gyro @ (up / max(float(np.linalg.norm(up)), 1e-9))
-    heading = np.r_[0.0, np.cumsum(0.5 * (yaw_rate[1:] + yaw_rate[:-1]) * np.diff(imu.t))]
+    heading = _running_integral(imu.t, imu.gyro @ _gravity_up(imu.accel))
     turned = np.interp(t1, imu.t, heading) - np.interp(t0, imu.t, heading)
     alike = _correlations(turned[None, :], turn, np.ones((1, len(turn)), bool))[0]
     if not abs(alike) >= MIN_LAG_CORRELATION:
@@ -1117,16 +1111,24 @@ def _wheel_resolution(path: Path, log: Log, warnings: list[str]) -> None:
 WHEEL_STEP_UNITS = {"1 km/h, an OBD-II vehicle speed?": 1 / 3.6, "1 mph": 0.44704, "0.1 m/s": 0.1}
 
 
+def _wheel_speed_ratio(w: WheelData, m: _GnssMotion) -> float | None:
+    """The wheel speed's median ratio to the GNSS speed while moving (each fix pair's speed
+    against the wheels' mean over the same interval); None with fewer than
+    :data:`MIN_WHEEL_PAIRS` such pairs."""
+    sel = m.moving & (m.t >= w.t[0]) & (m.t <= w.t[-1])
+    if np.count_nonzero(sel) < MIN_WHEEL_PAIRS:
+        return None
+    ws = _mean_over(w.t, w.speed, m.t[sel] - m.dt[sel] / 2, m.t[sel] + m.dt[sel] / 2)
+    return float(np.median(ws / m.speed[sel]))
+
+
 def _wheel_plausible(log: Log, m: _GnssMotion, warnings: list[str]) -> bool:
     w = log.wheel
     assert w is not None
+    ratio = _wheel_speed_ratio(w, m)
+    if ratio is None or WHEEL_RATIO_OK[0] <= ratio <= WHEEL_RATIO_OK[1]:
+        return True
     sel = m.moving & (m.t >= w.t[0]) & (m.t <= w.t[-1])
-    if np.count_nonzero(sel) < MIN_WHEEL_PAIRS:
-        return True
-    ws = _mean_over(w.t, w.speed, m.t[sel] - m.dt[sel] / 2, m.t[sel] + m.dt[sel] / 2)
-    ratio = float(np.median(ws / m.speed[sel]))
-    if WHEEL_RATIO_OK[0] <= ratio <= WHEEL_RATIO_OK[1]:
-        return True
     cause = next(
         (name for name, (lo, hi) in WHEEL_UNITS.items() if lo <= ratio <= hi),
         "a wrong unit or scale",
@@ -1251,7 +1253,7 @@ def _longest_stretch(t: F64, v: F64, imu_t: F64) -> tuple[F64, F64]:
     return t[bounds[k] : bounds[k + 1]], v[bounds[k] : bounds[k + 1]]
 
 
-def _running_integral(t: F64, v: F64, hole_s: float) -> F64:
+def _running_integral(t: F64, v: F64, hole_s: float = math.inf) -> F64:
     """The trapezoidal integral of ``v`` (N, ...) over ``t`` from its first sample, nothing
     added across a hole longer than ``hole_s``: after a clock jumped years, the double integral
     of the specific force was too large for a second's difference to show."""
@@ -1262,11 +1264,18 @@ def _running_integral(t: F64, v: F64, hole_s: float) -> F64:
     return out
 
 
+def _gravity_up(accel: F64) -> F64:
+    """The unit vector along the specific force's mean (N, 3): up, gravity's direction against,
+    whichever way the IMU is mounted (the vehicle's own accelerations average out)."""
+    up = np.mean(accel, axis=0)
+    out: F64 = up / max(float(np.linalg.norm(up)), 1e-9)
+    return out
+
+
 def _levelled_horizontal(accel: F64) -> F64:
     """The specific force (N, 3) on two horizontal axes (N, 2): perpendicular to its mean
     direction, gravity's, whichever way the IMU is mounted."""
-    up = np.mean(accel, axis=0)
-    up = up / max(float(np.linalg.norm(up)), 1e-9)
+    up = _gravity_up(accel)
     across = np.eye(3)[int(np.argmin(np.abs(up)))]
     first = across - (across @ up) * up
     first = first / np.linalg.norm(first)

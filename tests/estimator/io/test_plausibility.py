@@ -24,7 +24,7 @@ import pytest
 from estimator.errors import LogError
 from estimator.evaluation import method_metrics
 from estimator.io import load_log, write_bag
-from estimator.io.plausibility import MAX_LAG_S, _clock_step, _LagPeak, checked
+from estimator.io.plausibility import MAX_LAG_S, _clock_step, _gnss_motion, _LagPeak, checked
 from estimator.log import GnssData, ImuData, Log, WheelData
 from estimator.params import Params, with_values
 from estimator.pipeline import open_inputs, run
@@ -159,7 +159,7 @@ def _straight(speed: float, fix_hz: float, gap: tuple[float, float], step_s: flo
 
 def _steps_named(log: Log) -> list[str]:
     warnings: list[str] = []
-    _clock_step(Path(log.path), log, warnings)
+    _clock_step(Path(log.path), log, warnings, _gnss_motion(log))
     return warnings
 
 
