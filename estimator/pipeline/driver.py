@@ -114,7 +114,7 @@ from estimator.matching.map_bias import (
 from estimator.matching.reanchor import gap_bound_m, should_reanchor, within_drift
 from estimator.nav.frames import LocalFrame
 from estimator.nav.rotation import yaw_from_quaternion
-from estimator.params import Method, Params, for_method, matching_params
+from estimator.params import Method, Params, for_method, get_param, matching_params
 from estimator.pipeline.inputs import frame_of
 from estimator.pipeline.reuse import (
     Checkpoint,
@@ -209,11 +209,7 @@ def run(
         dropped_fix_times=tuple(driver.dropped_fixes),
         exits=exits,
         warnings=configured_clock_warnings(
-            log,
-            {
-                "sensors.gnss_time_offset_s": p.sensors.gnss_time_offset_s,
-                "sensors.wheel_time_offset_s": p.sensors.wheel_time_offset_s,
-            },
+            log, {o.setting: float(get_param(p, o.setting)) for o in log.clock_offsets}
         )
         + inputs.warnings
         + (route.warnings if route is not None else ())
