@@ -386,8 +386,8 @@ def _coasting_fixes(path: Path, log: Log, warnings: list[str]) -> GnssData:
         return g
     t = g.t[ok]
     dt = np.diff(t)
-    unbroken = dt <= max(CLOCK_STEP_GAP_S, CLOCK_STEP_GAP_INTERVALS * float(np.median(dt)))
-    xy = LocalFrame.at(g.lat[ok], g.lon[ok], g.alt[ok]).to_enu(g.lat[ok], g.lon[ok])[:, :2]
+    unbroken = dt <= _fix_gap_s(dt)
+    xy = _fixes_xy(g, ok)
     judged = _wheels_on_the_gnss_scale(log, _gnss_motion(log))
     w = judged.wheel
     assert w is not None
@@ -428,6 +428,18 @@ def _coasting_fixes(path: Path, log: Log, warnings: list[str]) -> GnssData:
             f"span it did as an outage (--outage START:{rel[ok[c]]:.1f})"
         )
     return g if status is g.status else dataclasses.replace(g, status=status)
+
+
+def _fix_gap_s(dt: F64) -> float:
+    """Valid fixes further apart than this (``dt``: their intervals) bracket a gap
+    (:data:`CLOCK_STEP_GAP_S`, :data:`CLOCK_STEP_GAP_INTERVALS`)."""
+    return max(CLOCK_STEP_GAP_S, CLOCK_STEP_GAP_INTERVALS * float(np.median(dt)))
+
+
+def _fixes_xy(g: GnssData, ok: NDArray[np.intp]) -> F64:
+    """The fixes ``ok`` east and north (N, 2), m, in a frame at the first of them."""
+    xy: F64 = LocalFrame.at(g.lat[ok], g.lon[ok], g.alt[ok]).to_enu(g.lat[ok], g.lon[ok])[:, :2]
+    return xy
 
 
 def _coast_onset(t: F64, var: F64, c: int, unbroken: NDArray[np.bool_]) -> int | None:
@@ -640,11 +652,11 @@ def _clock_step(path: Path, log: Log, warnings: list[str], motion: _GnssMotion |
         return g
     t = g.t[ok]
     dt = np.diff(t)
-    gap = max(CLOCK_STEP_GAP_S, CLOCK_STEP_GAP_INTERVALS * float(np.median(dt)))
+    gap = _fix_gap_s(dt)
     gaps = np.flatnonzero((dt > gap) & (dt <= MAX_CLOCK_STEP_GAP_S))
     if not len(gaps):
         return g
-    xy = LocalFrame.at(g.lat[ok], g.lon[ok], g.alt[ok]).to_enu(g.lat[ok], g.lon[ok])[:, :2]
+    xy = _fixes_xy(g, ok)
     judged = _wheels_on_the_gnss_scale(log, motion)
     for a in gaps:
         shift = _step_at(judged, t, xy, int(a))
